@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Creates or updates .venv with the project and its test tools. Idempotent: a stamp file
+# records the hash of pyproject.toml, so an unchanged project costs nothing the second time.
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+cd "$root"
+py="${PYTHON:-python3}"
+[ -x .venv/bin/python ] || "$py" -m venv .venv
+stamp=.venv/.mlagents-like-stamp
+want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+  # torch first and pinned: a bare 'torch' requirement would pull a multi-GB CUDA build.
+  .venv/bin/python -m pip install -q --upgrade pip
+  .venv/bin/python -m pip show torch >/dev/null 2>&1 || .venv/bin/python -m pip install -q "torch==2.13.0"
+  .venv/bin/python -m pip install -q -e ".[test]"
+  echo "$want" > "$stamp"
+else
+  # cheap re-link of the editable install in case the tree moved
+  .venv/bin/python -c "import trainer, unity_stub_env, protos" 2>/dev/null || .venv/bin/python -m pip install -q --no-deps -e .
+fi

@@ -1,0 +1,45 @@
+"""Errors a user can act on. Each carries one message that names the thing and what to do.
+
+The CLI turns any ``UserError`` into that one message on stderr and exit code 2 (no traceback
+unless ``--debug``). Everything else is a bug and keeps its traceback.
+"""
+from __future__ import annotations
+
+
+class UserError(Exception):
+    """Bad input or a broken environment the user can fix. Exit code 2."""
+
+    exit_code = 2
+
+
+class ConfigError(UserError):
+    """A YAML file or CLI flag that is malformed, unknown or out of range."""
+
+
+class EnvironmentNotFoundError(UserError):
+    """--env names no executable we can find."""
+
+
+class PortInUseError(UserError):
+    """The port we need to listen on is taken."""
+
+
+class UnityTimeOutError(UserError):
+    """The simulator did not connect, or stopped answering, within --timeout-wait."""
+
+
+class SimulatorExitedError(UserError):
+    """The simulator process died."""
+
+
+class UnityVersionError(UserError):
+    """The simulator speaks an incompatible communication API version."""
+
+
+class ProtocolError(UserError):
+    """The simulator sent a message we cannot make sense of (garbled, NaN reward, bad shapes)."""
+
+
+class UnityCommunicatorStoppedError(Exception):
+    """The simulator closed the connection (status != 200). Not an error: training stops cleanly."""
+
