@@ -1,0 +1,210 @@
+"""Experience assembly: decision/terminal steps of one env's behavior → trajectories.
+
+ML-Agents keeps one Python object per agent and appends to lists per step. Here every agent of a
+(env, behavior) pair owns a *slot* in preallocated arrays of ``time_horizon`` rows, and each step
+writes all agents at once with fancy indexing. Python touches each agent only to map its episode
+id to a slot (one dict lookup); per-trajectory work (emitting) is per agent, but that happens once
+per ``time_horizon`` steps or episode end, not every step.
+
+Rules (spec §10 "Experience assembly"):
+- the reward that arrives with observation t+1 is paired with the observation and action of t;
+  the reward on an agent's very first decision of an episode is dropped;
+- extrinsic reward = reward + group_reward;
+- a trajectory is cut at ``time_horizon`` experiences (next_obs = the current observation, not done)
+  or when the episode ends (next_obs = the terminal observation, done, interrupted if max_step);
+- episode ids change every episode, so a slot lives for exactly one episode.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from trainer.ppo.buffer import Trajectory
+from trainer.protocol.types import BehaviorSpec, DecisionSteps, TerminalSteps
+
+
+@dataclass
+class EpisodeStats:
+    """Finished episodes since the last drain: env reward only, lengths in decisions."""
+
+    rewards: list[float] = field(default_factory=list)
+    lengths: list[int] = field(default_factory=list)
+
+
+class AgentTracker:
+    """Slot-array experience builder for one behavior in one env connection."""
+
+    def __init__(self, spec: BehaviorSpec, time_horizon: int, capacity: int = 16):
+        self.spec = spec
+        self.time_horizon = int(time_horizon)
+        self._slot_of: dict[int, int] = {}
+        self._free: list[int] = []
+        self._cap = 0
+        self.episodes = EpisodeStats()
+        self._alloc(max(1, capacity))
+
+    # ---------------------------------------------------------------- storage
+    def _alloc(self, cap: int) -> None:
+        """Grow every per-slot array to ``cap`` slots, keeping existing contents."""
+        h = self.time_horizon
+        a = self.spec.action_spec
+        n_mask = int(sum(a.discrete_branches))
+        shapes = [tuple(o.shape) for o in self.spec.observation_specs]
+
+        def grow(old: np.ndarray | None, shape: tuple, dtype) -> np.ndarray:
+            new = np.zeros((cap, *shape), dtype=dtype)
+            if old is not None:
+                new[: old.shape[0]] = old
+            return new
+
+        first = self._cap == 0
+        g = (lambda name: None) if first else (lambda name: getattr(self, name))
+        self.obs = [grow(None if first else self.obs[i], (h, *s), np.float32) for i, s in enumerate(shapes)]
+        self.cont = grow(g("cont"), (h, a.continuous_size), np.float32)
+        self.disc = grow(g("disc"), (h, a.discrete_size), np.int32)
+        self.logp = grow(g("logp"), (h, a.continuous_size + a.discrete_size), np.float32)
+        self.mask = grow(g("mask"), (h, n_mask), bool)
+        self.rewards = grow(g("rewards"), (h,), np.float32)
+        self.length = grow(g("length"), (), np.int64)
+        # the decision awaiting its reward: observation, action, log-probs and mask of step t
+        self.pending = grow(g("pending"), (), bool)
+        self.p_obs = [grow(None if first else self.p_obs[i], s, np.float32) for i, s in enumerate(shapes)]
+        self.p_cont = grow(g("p_cont"), (a.continuous_size,), np.float32)
+        self.p_disc = grow(g("p_disc"), (a.discrete_size,), np.int32)
+        self.p_logp = grow(g("p_logp"), (a.continuous_size + a.discrete_size,), np.float32)
+        self.p_mask = grow(g("p_mask"), (n_mask,), bool)
+        self.ep_reward = grow(g("ep_reward"), (), np.float64)
+        self.ep_length = grow(g("ep_length"), (), np.int64)
+        self._free.extend(range(cap - 1, self._cap - 1, -1))
+        self._cap = cap
+
+    def _slots(self, agent_ids: np.ndarray) -> np.ndarray:
+        slot_of = self._slot_of
+        missing = [int(i) for i in agent_ids if int(i) not in slot_of]
+        if missing:
+            if len(missing) > len(self._free):
+                self._alloc(max(self._cap * 2, self._cap + len(missing)))
+            for agent in missing:
+                s = self._free.pop()
+                slot_of[agent] = s
+                self.pending[s] = False
+                self.length[s] = 0
+                self.ep_reward[s] = 0.0
+                self.ep_length[s] = 0
+        return np.fromiter((slot_of[int(i)] for i in agent_ids), dtype=np.int64, count=len(agent_ids))
+
+    @property
+    def num_agents(self) -> int:
+        return len(self._slot_of)
+
+    # ------------------------------------------------------------- experience
+    def _record(self, slots: np.ndarray, reward: np.ndarray) -> None:
+        """Close the pending decision of ``slots`` with the reward that just arrived."""
+        t = self.length[slots]
+        for i, buf in enumerate(self.obs):
+            buf[slots, t] = self.p_obs[i][slots]
+        self.cont[slots, t] = self.p_cont[slots]
+        self.disc[slots, t] = self.p_disc[slots]
+        self.logp[slots, t] = self.p_logp[slots]
+        self.mask[slots, t] = self.p_mask[slots]
+        self.rewards[slots, t] = reward
+        self.length[slots] = t + 1
+        self.pending[slots] = False
+
+    def _emit(self, slot: int, next_obs: list[np.ndarray], done: bool, interrupted: bool) -> Trajectory:
+        n = int(self.length[slot])
+        has_mask = self.mask.shape[-1] > 0
+        traj = Trajectory(
+            obs=[buf[slot, :n].copy() for buf in self.obs],
+            next_obs=[o.copy() for o in next_obs],
+            rewards=self.rewards[slot, :n].copy(),
+            continuous_actions=self.cont[slot, :n].copy(),
+            discrete_actions=self.disc[slot, :n].copy(),
+            log_probs=self.logp[slot, :n].copy(),
+            action_masks=self.mask[slot, :n].copy() if has_mask else None,
+            done=done,
+            interrupted=interrupted,
+        )
+        self.length[slot] = 0
+        return traj
+
+    def on_terminal(self, ts: TerminalSteps, emit: Callable[[Trajectory], None]) -> None:
+        """Agents whose episode ended: final reward, trajectory with done, episode stats."""
+        if len(ts) == 0:
+            return
+        known = np.array([int(i) in self._slot_of for i in ts.agent_id], dtype=bool)
+        if not known.any():
+            return  # ended before ever deciding: nothing was experienced
+        idx = np.nonzero(known)[0]
+        slots = self._slots(ts.agent_id[idx])
+        has = self.pending[slots]
+        if has.any():
+            s = slots[has]
+            self._record(s, ts.reward[idx][has] + ts.group_reward[idx][has])
+            self.ep_reward[s] += ts.reward[idx][has]
+            self.ep_length[s] += 1
+        for k, slot in zip(idx, slots):
+            slot = int(slot)
+            if self.length[slot] > 0:
+                emit(self._emit(slot, [o[k] for o in ts.obs], True, bool(ts.interrupted[k])))
+            self.episodes.rewards.append(float(self.ep_reward[slot]))
+            self.episodes.lengths.append(int(self.ep_length[slot]))
+            del self._slot_of[int(ts.agent_id[k])]
+            self._free.append(slot)
+
+    def on_decision(self, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
+        """Agents asking for a decision: pair their reward with the previous action, cut at
+        time_horizon, remember the new observation. Returns their slots (for ``on_actions``)."""
+        slots = self._slots(ds.agent_id)
+        if len(slots) == 0:
+            return slots
+        has = self.pending[slots]
+        if has.any():
+            s = slots[has]
+            self._record(s, ds.reward[has] + ds.group_reward[has])
+            self.ep_reward[s] += ds.reward[has]
+            self.ep_length[s] += 1
+            full = np.nonzero(has & (self.length[slots] >= self.time_horizon))[0]
+            for k in full:
+                emit(self._emit(int(slots[k]), [o[k] for o in ds.obs], False, False))
+        for i, o in enumerate(ds.obs):
+            self.p_obs[i][slots] = o
+        return slots
+
+    def on_actions(
+        self,
+        slots: np.ndarray,
+        continuous_raw: np.ndarray,
+        discrete: np.ndarray,
+        log_probs: np.ndarray,
+        action_mask: np.ndarray | None,
+    ) -> None:
+        """Store the policy's answer for the agents of the last ``on_decision`` call."""
+        self.p_cont[slots] = continuous_raw
+        self.p_disc[slots] = discrete
+        self.p_logp[slots] = log_probs
+        if action_mask is not None and self.p_mask.shape[-1] > 0:
+            self.p_mask[slots] = action_mask
+        else:
+            self.p_mask[slots] = False
+        self.pending[slots] = True
+
+    def drop_all(self) -> None:
+        """After a RESET or an env restart: in-progress trajectories are thrown away."""
+        self._free.extend(self._slot_of.values())
+        self._slot_of.clear()
+
+    def drain_episodes(self) -> EpisodeStats:
+        out, self.episodes = self.episodes, EpisodeStats()
+        return out
+
+
+def concat_masks(ds: DecisionSteps, branches: tuple[int, ...]) -> np.ndarray | None:
+    """Per-branch masks (True = forbidden) → one bool [n, sum(branches)] array, or None."""
+    if not branches:
+        return None
+    if ds.action_mask is None:
+        return np.zeros((len(ds), int(sum(branches))), dtype=bool)
+    return np.concatenate(ds.action_mask, axis=1)
