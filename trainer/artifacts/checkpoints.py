@@ -1,0 +1,70 @@
+"""checkpoint.pt files: atomic saves and safe (weights_only) loads.
+
+A checkpoint holds only tensors, numbers, strings, dicts and lists, so it loads with
+``torch.load(weights_only=True)``, which refuses any pickle that would run code.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+import tempfile
+from typing import Any
+
+import torch
+
+from trainer.errors import UserError
+
+_RECOVERY_HINT = "use --force to start over, or a different --run-id"
+
+
+def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> None:
+    """torch.save ``state`` to a temp file beside ``path``, fsync it, then os.replace onto ``path``.
+
+    A failure at any point leaves an existing file at ``path`` untouched.
+    """
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    handle, tmp_path = tempfile.mkstemp(prefix=".checkpoint-", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(handle, "wb") as tmp:
+            torch.save(state, tmp)
+            tmp.flush()
+            os.fsync(tmp.fileno())
+        os.replace(tmp_path, path)
+    except BaseException:
+        if os.path.exists(tmp_path):
+            os.remove(tmp_path)
+        raise
+    _fsync_folder(folder)
+
+
+def _fsync_folder(folder: str) -> None:
+    """Make the rename durable where the platform allows opening a directory."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Load a checkpoint onto the CPU, refusing anything but plain tensors and containers."""
+    if not os.path.isfile(path):
+        raise UserError(f"checkpoint {os.fspath(path)!r} does not exist; {_RECOVERY_HINT}")
+    try:
+        state = torch.load(path, weights_only=True, map_location="cpu")
+    except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, OSError, AttributeError) as error:
+        raise UserError(
+            f"checkpoint {os.fspath(path)!r} is corrupt or not a trainer checkpoint "
+            f"({type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}); {_RECOVERY_HINT}"
+        ) from error
+    if not isinstance(state, dict):
+        raise UserError(
+            f"checkpoint {os.fspath(path)!r} does not hold a dict of state dicts; {_RECOVERY_HINT}"
+        )
+    return state

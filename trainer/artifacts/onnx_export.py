@@ -1,0 +1,110 @@
+"""Export a policy's actor to the ONNX model Unity's inference engine loads (spec §8).
+
+Legacy TorchScript exporter, opset 9. Inputs obs_0..obs_{n-1} (+ action_masks, float 1 = allowed, only
+with discrete branches). Outputs, in order: version_number, memory_size, then for continuous actions
+continuous_actions / continuous_action_output_shape / deterministic_continuous_actions, then for
+discrete actions discrete_actions / discrete_action_output_shape / deterministic_discrete_actions.
+Sampling (RandomNormalLike, Multinomial) and observation normalisation happen inside the graph.
+"""
+from __future__ import annotations
+
+import copy
+import io
+import os
+import tempfile
+import warnings
+
+import torch
+from torch import nn
+
+from trainer.ppo.networks import Actor
+from trainer.ppo.policy import CONTINUOUS_CLIP, Policy
+
+ONNX_OPSET = 9
+BATCH_AXIS = "batch"
+
+
+class ExportableActor(nn.Module):
+    """Wraps an Actor with the positional inputs and tuple outputs the ONNX contract names."""
+
+    def __init__(self, actor: Actor, n_obs: int):
+        super().__init__()
+        self.actor = actor
+        self.n_obs = n_obs
+        self.has_continuous = actor.action_spec.continuous_size > 0
+        self.has_discrete = len(actor.action_spec.discrete_branches) > 0
+
+    def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        observations = list(inputs[: self.n_obs])
+        allowed = inputs[self.n_obs] if self.has_discrete else None
+        mu, logits = self.actor.heads(observations, allowed)
+        outputs = [self.actor.version_number, self.actor.memory_size_vector]
+        if mu is not None:
+            sigma = torch.exp(mu * 0 + self.actor.log_sigma)
+            sample = mu + torch.randn_like(mu) * sigma
+            outputs += [
+                torch.clamp(sample, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP,
+                self.actor.continuous_act_size_vector,
+                torch.clamp(mu, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP,
+            ]
+        if logits:
+            probs = [torch.softmax(branch, dim=1) for branch in logits]
+            outputs += [
+                torch.cat([torch.multinomial(p, 1) for p in probs], dim=1),
+                self.actor.discrete_act_size_vector,
+                torch.cat([torch.argmax(p, dim=1, keepdim=True) for p in probs], dim=1),
+            ]
+        return tuple(outputs)
+
+
+def _names(policy: Policy) -> tuple[list[str], list[str]]:
+    spec = policy.action_spec
+    inputs = [f"obs_{i}" for i in range(len(policy.behavior_spec.observation_specs))]
+    outputs = ["version_number", "memory_size"]
+    if spec.continuous_size > 0:
+        outputs += ["continuous_actions", "continuous_action_output_shape", "deterministic_continuous_actions"]
+    if spec.discrete_branches:
+        inputs.append("action_masks")
+        outputs += ["discrete_actions", "discrete_action_output_shape", "deterministic_discrete_actions"]
+    return inputs, outputs
+
+
+def export_to_bytes(policy: Policy) -> bytes:
+    """Serialize the policy's actor to ONNX bytes (CPU copy; the live actor is not touched)."""
+    actor = copy.deepcopy(policy.actor).to("cpu").eval()
+    n_obs = len(policy.behavior_spec.observation_specs)
+    dummy = [torch.zeros((1, *spec.shape)) for spec in policy.behavior_spec.observation_specs]
+    if policy.action_spec.discrete_branches:
+        dummy.append(torch.ones((1, sum(policy.action_spec.discrete_branches))))
+    input_names, output_names = _names(policy)
+    dynamic_axes = {name: {0: BATCH_AXIS} for name in input_names}
+    for name in ("continuous_actions", "discrete_actions"):
+        if name in output_names:
+            dynamic_axes[name] = {0: BATCH_AXIS}
+    buffer = io.BytesIO()
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(
+            ExportableActor(actor, n_obs), tuple(dummy), buffer,
+            opset_version=ONNX_OPSET, input_names=input_names, output_names=output_names,
+            dynamic_axes=dynamic_axes, dynamo=False,
+        )
+    return buffer.getvalue()
+
+
+def export_policy(policy: Policy, path: str | os.PathLike[str]) -> None:
+    """Write ``path`` (.onnx) atomically: a temp file in the same folder, fsync, then os.replace."""
+    payload = export_to_bytes(policy)
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    handle, tmp_path = tempfile.mkstemp(prefix=".onnx-", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(handle, "wb") as tmp:
+            tmp.write(payload)
+            tmp.flush()
+            os.fsync(tmp.fileno())
+        os.replace(tmp_path, path)
+    except BaseException:
+        if os.path.exists(tmp_path):
+            os.remove(tmp_path)
+        raise

@@ -1,0 +1,58 @@
+"""The trajectory handed over by the rollout, and the PPO update buffer.
+
+The update buffer keeps one growing list of arrays per field and concatenates them only when an
+update starts, so appending a trajectory costs no copy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Trajectory:
+    """T consecutive experiences of one agent (cut at time_horizon or at the end of its episode)."""
+
+    obs: list[np.ndarray]  # per observation, float32 [T, *shape]: what the agent saw when it acted
+    next_obs: list[np.ndarray]  # per observation, float32 [*shape]: after the last step (terminal or current)
+    rewards: np.ndarray  # float32 [T]: reward that arrived after action t (already including group_reward)
+    continuous_actions: np.ndarray  # float32 [T, c]: raw (unclamped) samples
+    discrete_actions: np.ndarray  # int [T, b]
+    log_probs: np.ndarray  # float32 [T, c + b]
+    action_masks: np.ndarray | None  # bool [T, sum(branches)], True = masked; None = nothing masked
+    done: bool  # the trajectory ends its episode
+    interrupted: bool  # the episode ended by max_step_reached: bootstrap anyway
+
+    def __len__(self) -> int:
+        return int(self.rewards.shape[0])
+
+
+class UpdateBuffer:
+    """Experiences waiting for the next PPO update: field name -> list of [T, ...] arrays."""
+
+    def __init__(self) -> None:
+        self._fields: dict[str, list[np.ndarray]] = {}
+        self._length = 0
+
+    def __len__(self) -> int:
+        return self._length
+
+    def append(self, fields: dict[str, np.ndarray]) -> None:
+        """Add one trajectory's arrays; every array shares the same leading length T."""
+        lengths = {name: len(array) for name, array in fields.items()}
+        if len(set(lengths.values())) > 1:
+            raise ValueError(f"fields of one trajectory disagree on length: {lengths}")
+        if self._fields and set(fields) != set(self._fields):
+            raise ValueError(f"fields {sorted(fields)} differ from buffered fields {sorted(self._fields)}")
+        for name, array in fields.items():
+            self._fields.setdefault(name, []).append(array)
+        self._length += next(iter(lengths.values()), 0)
+
+    def concatenated(self) -> dict[str, np.ndarray]:
+        """All buffered experiences, field name -> array [len(self), ...]."""
+        return {name: np.concatenate(arrays, axis=0) for name, arrays in self._fields.items()}
+
+    def clear(self) -> None:
+        self._fields = {}
+        self._length = 0

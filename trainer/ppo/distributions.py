@@ -1,0 +1,45 @@
+"""Log-probabilities and entropies of the action distributions, as pure torch functions.
+
+The small constant EPSILON matches ML-Agents so log-probs and entropies agree numerically.
+Shapes: n = batch, c = continuous dimensions, k = options of one discrete branch.
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+
+EPSILON = 1e-7
+_LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
+MASKED_LOGIT_OFFSET = 1e8
+
+
+def gaussian_log_prob(actions: torch.Tensor, mu: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:
+    """Per-dimension log N(a; mu, sigma). actions, mu [n, c]; log_sigma [1, c] or [n, c] -> [n, c]."""
+    sigma = torch.exp(log_sigma)
+    return (
+        -((actions - mu) ** 2) / (2 * sigma**2 + EPSILON)
+        - torch.log(sigma + EPSILON)
+        - _LOG_SQRT_2PI
+    )
+
+
+def gaussian_entropy(log_sigma: torch.Tensor) -> torch.Tensor:
+    """Per-dimension entropy 0.5*log(2*pi*e*sigma^2). log_sigma [.., c] -> [.., c]."""
+    return 0.5 * torch.log(2 * math.pi * math.e * torch.exp(log_sigma) ** 2 + EPSILON)
+
+
+def mask_logits(logits: torch.Tensor, allowed: torch.Tensor) -> torch.Tensor:
+    """logits * allowed - 1e8 * (1 - allowed). logits, allowed (float, 1 = allowed) [n, k] -> [n, k]."""
+    return logits * allowed - MASKED_LOGIT_OFFSET * (-1.0 * allowed + 1.0)
+
+
+def categorical_log_prob(probs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """log(p[action] + EPSILON). probs [n, k]; actions int [n] -> [n]."""
+    chosen = torch.gather(probs, 1, actions.long().unsqueeze(1)).squeeze(1)
+    return torch.log(chosen + EPSILON)
+
+
+def categorical_entropy(probs: torch.Tensor) -> torch.Tensor:
+    """-sum_k p log(p + EPSILON). probs [n, k] -> [n]."""
+    return -torch.sum(probs * torch.log(probs + EPSILON), dim=1)

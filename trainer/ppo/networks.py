@@ -1,0 +1,160 @@
+"""Actor and critic networks (separate bodies, encoders and normalisers, as ML-Agents' default).
+
+Body: encoders of every observation concatenated -> num_layers x (Linear -> Swish).
+Actor heads: Gaussian mu (Kaiming normal, gain 0.2) with a state-independent log_sigma (init 0);
+one Linear per discrete branch (Kaiming normal, gain 0.1). Critic: one Linear(h, 1) per reward signal.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import torch
+from torch import nn
+
+from trainer.errors import ConfigError
+from trainer.ppo.distributions import mask_logits
+from trainer.ppo.encoders import VectorInput, make_visual_encoder
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.layers import KAIMING_NORMAL, XAVIER_UNIFORM, hidden_layers, linear_layer
+from trainer.protocol.types import ActionSpec, ObservationSpec
+
+MODEL_EXPORT_VERSION = 3
+
+
+def check_network_settings(hyperparams: PPOHyperparams) -> None:
+    if hyperparams.memory:
+        raise ConfigError(
+            "network_settings.memory is not supported yet; remove the memory block from the "
+            "behavior's network_settings"
+        )
+
+
+class ObservationEncoder(nn.Module):
+    """Encodes a list of observations [n, *shape_i] into one [n, total] tensor."""
+
+    def __init__(self, observation_specs: Sequence[ObservationSpec], hidden_units: int,
+                 vis_encode_type: str, normalize: bool):
+        super().__init__()
+        encoders: list[nn.Module] = []
+        self.output_size = 0
+        for index, spec in enumerate(observation_specs):
+            shape = tuple(spec.shape)
+            if len(shape) == 1:
+                encoders.append(VectorInput(shape[0], normalize))
+                self.output_size += shape[0]
+            elif len(shape) == 3:
+                encoders.append(make_visual_encoder(shape, hidden_units, vis_encode_type))
+                self.output_size += hidden_units
+            else:
+                raise ConfigError(
+                    f"observation {index} ({spec.name!r}) has shape {shape}; only vector (N,) and "
+                    "visual (C, H, W) observations are supported (variable-length observations are not)"
+                )
+        self.encoders = nn.ModuleList(encoders)
+
+    def forward(self, observations: Sequence[torch.Tensor]) -> torch.Tensor:
+        encoded = [encoder(obs) for encoder, obs in zip(self.encoders, observations)]
+        return torch.cat(encoded, dim=1) if len(encoded) > 1 else encoded[0]
+
+    def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:
+        for encoder, obs in zip(self.encoders, observations):
+            if isinstance(encoder, VectorInput):
+                encoder.update_normalization(obs)
+
+
+class NetworkBody(nn.Module):
+    """Observation encoders -> hidden layers. [n, *shape_i] ... -> [n, hidden_units]."""
+
+    def __init__(self, observation_specs: Sequence[ObservationSpec], hyperparams: PPOHyperparams):
+        super().__init__()
+        check_network_settings(hyperparams)
+        self.observation_encoder = ObservationEncoder(
+            observation_specs, hyperparams.hidden_units, hyperparams.vis_encode_type, hyperparams.normalize
+        )
+        self.hidden = hidden_layers(
+            self.observation_encoder.output_size, hyperparams.hidden_units, hyperparams.num_layers
+        )
+        self.output_size = hyperparams.hidden_units if hyperparams.num_layers > 0 else (
+            self.observation_encoder.output_size
+        )
+
+    def forward(self, observations: Sequence[torch.Tensor]) -> torch.Tensor:
+        return self.hidden(self.observation_encoder(observations))
+
+    def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:
+        self.observation_encoder.update_normalization(observations)
+
+
+def _constant(values: list[float]) -> nn.Parameter:
+    return nn.Parameter(torch.tensor(values, dtype=torch.float32), requires_grad=False)
+
+
+class Actor(nn.Module):
+    """The policy network. ``heads`` gives the distribution parameters for a batch.
+
+    Besides weights, the state dict carries the ONNX constants ``version_number``, ``memory_size_vector``,
+    ``continuous_act_size_vector`` and ``discrete_act_size_vector`` (as in ML-Agents).
+    """
+
+    def __init__(self, observation_specs: Sequence[ObservationSpec], action_spec: ActionSpec,
+                 hyperparams: PPOHyperparams):
+        super().__init__()
+        self.action_spec = action_spec
+        self.version_number = _constant([float(MODEL_EXPORT_VERSION)])
+        self.memory_size_vector = _constant([0.0])
+        self.continuous_act_size_vector = _constant([float(action_spec.continuous_size)])
+        self.discrete_act_size_vector = _constant([[float(b) for b in action_spec.discrete_branches]])
+        self.network_body = NetworkBody(observation_specs, hyperparams)
+        hidden = self.network_body.output_size
+        self.mu: nn.Linear | None = None
+        if action_spec.continuous_size > 0:
+            self.mu = linear_layer(hidden, action_spec.continuous_size, KAIMING_NORMAL, 0.2)
+            self.log_sigma = nn.Parameter(torch.zeros(1, action_spec.continuous_size))
+        self.discrete_branches = nn.ModuleList(
+            linear_layer(hidden, size, KAIMING_NORMAL, 0.1) for size in action_spec.discrete_branches
+        )
+        offsets = [0]
+        for size in action_spec.discrete_branches:
+            offsets.append(offsets[-1] + size)
+        self._mask_offsets = offsets
+
+    def heads(self, observations: Sequence[torch.Tensor], allowed: torch.Tensor | None
+              ) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
+        """Continuous mean mu [n, c] (or None) and masked logits [n, k_b] for every branch b.
+
+        allowed: float [n, sum(branches)], 1 = allowed, 0 = masked (None = all allowed).
+        """
+        encoding = self.network_body(observations)
+        mu = self.mu(encoding) if self.mu is not None else None
+        logits = []
+        for index, branch in enumerate(self.discrete_branches):
+            branch_logits = branch(encoding)
+            if allowed is not None:
+                start, end = self._mask_offsets[index], self._mask_offsets[index + 1]
+                branch_logits = mask_logits(branch_logits, allowed[:, start:end])
+            logits.append(branch_logits)
+        return mu, logits
+
+    def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:
+        self.network_body.update_normalization(observations)
+
+
+class Critic(nn.Module):
+    """Value network: own body and normalisers, one Linear(h, 1) head (Xavier uniform) per reward signal."""
+
+    def __init__(self, observation_specs: Sequence[ObservationSpec], reward_signal_names: Sequence[str],
+                 hyperparams: PPOHyperparams):
+        super().__init__()
+        self.network_body = NetworkBody(observation_specs, hyperparams)
+        hidden = self.network_body.output_size
+        self.value_heads = nn.ModuleDict(
+            {name: linear_layer(hidden, 1, XAVIER_UNIFORM, 1.0) for name in reward_signal_names}
+        )
+
+    def forward(self, observations: Sequence[torch.Tensor]) -> dict[str, torch.Tensor]:
+        """Value estimates per reward signal, each [n]."""
+        encoding = self.network_body(observations)
+        return {name: head(encoding).squeeze(1) for name, head in self.value_heads.items()}
+
+    def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:
+        self.network_body.update_normalization(observations)

@@ -1,0 +1,132 @@
+"""The acting policy: one batched forward pass for every deciding agent of a behavior.
+
+Continuous actions are sampled from an unbounded Gaussian; the raw sample is kept for log-probs and
+the environment receives clamp(a, -3, 3) / 3. Discrete actions are a multinomial sample per branch.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from trainer.ppo.distributions import (
+    categorical_entropy,
+    categorical_log_prob,
+    gaussian_entropy,
+    gaussian_log_prob,
+)
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.losses import combined_entropy
+from trainer.ppo.networks import Actor
+from trainer.protocol.types import ActionTuple, BehaviorSpec
+
+CONTINUOUS_CLIP = 3.0
+
+
+@dataclass(frozen=True)
+class PolicyOutput:
+    """What one call to ``Policy.act`` produced for n agents."""
+
+    env_actions: ActionTuple  # continuous float32 [n, c] in [-1, 1]; discrete int32 [n, b]
+    continuous_raw: np.ndarray  # float32 [n, c] unclamped samples (stored for log-probs)
+    discrete: np.ndarray  # int32 [n, b]
+    log_probs: np.ndarray  # float32 [n, c + b], per continuous dimension then per discrete branch
+    entropy: np.ndarray  # float32 [n], mean over Gaussian dims + sum over branches
+
+
+def allowed_from_mask(action_mask: np.ndarray | None) -> torch.Tensor | None:
+    """bool [n, sum(branches)] with True = masked -> float tensor with 1 = allowed (None stays None)."""
+    if action_mask is None:
+        return None
+    return torch.from_numpy(np.logical_not(action_mask)).float()
+
+
+class Policy:
+    """Actor network plus sampling. ``act`` is the hot path used by the rollout for every decision."""
+
+    def __init__(self, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int,
+                 device: str = "cpu"):
+        self.behavior_spec = behavior_spec
+        self.action_spec = behavior_spec.action_spec
+        self.hyperparams = hyperparams
+        self.device = torch.device(device)
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            self.actor = Actor(behavior_spec.observation_specs, self.action_spec, hyperparams).to(self.device)
+        self.generator = torch.Generator(device=self.device)
+        self.generator.manual_seed(seed + 1)
+
+    def _to_tensors(self, obs: Sequence[np.ndarray]) -> list[torch.Tensor]:
+        return [torch.as_tensor(np.asarray(o, dtype=np.float32), device=self.device) for o in obs]
+
+    def act(self, obs: Sequence[np.ndarray], action_mask: np.ndarray | None = None,
+            deterministic: bool = False) -> PolicyOutput:
+        """Sample actions for n agents in one forward pass.
+
+        obs: one float32 array [n, *shape_i] per observation. action_mask: bool [n, sum(branches)],
+        True = masked, or None. ``deterministic`` (or hyperparams.deterministic) uses mean / argmax.
+        """
+        deterministic = deterministic or self.hyperparams.deterministic
+        allowed = allowed_from_mask(action_mask)
+        with torch.inference_mode():
+            tensors = self._to_tensors(obs)
+            if allowed is not None:
+                allowed = allowed.to(self.device)
+            mu, logits = self.actor.heads(tensors, allowed)
+            n = tensors[0].shape[0]
+            log_prob_parts: list[torch.Tensor] = []
+            discrete_entropies: list[torch.Tensor] = []
+            continuous_entropy = None
+            raw = torch.zeros((n, 0), device=self.device)
+            if mu is not None:
+                log_sigma = self.actor.log_sigma.expand_as(mu)
+                raw = mu if deterministic else mu + torch.randn(
+                    mu.shape, generator=self.generator, device=self.device
+                ) * torch.exp(log_sigma)
+                log_prob_parts.append(gaussian_log_prob(raw, mu, log_sigma))
+                continuous_entropy = gaussian_entropy(log_sigma)
+            chosen = []
+            for branch_logits in logits:
+                probs = torch.softmax(branch_logits, dim=1)
+                if deterministic:
+                    action = torch.argmax(probs, dim=1)
+                else:
+                    action = torch.multinomial(probs, 1, generator=self.generator).squeeze(1)
+                chosen.append(action)
+                log_prob_parts.append(categorical_log_prob(probs, action).unsqueeze(1))
+                discrete_entropies.append(categorical_entropy(probs))
+            discrete = torch.stack(chosen, dim=1) if chosen else torch.zeros((n, 0), dtype=torch.int64)
+            log_probs = torch.cat(log_prob_parts, dim=1)
+            entropy = combined_entropy(continuous_entropy, discrete_entropies)
+            env_continuous = torch.clamp(raw, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP
+        discrete_np = discrete.to(torch.int32).cpu().numpy()
+        return PolicyOutput(
+            env_actions=ActionTuple(env_continuous.cpu().numpy(), discrete_np),
+            continuous_raw=raw.cpu().numpy(),
+            discrete=discrete_np,
+            log_probs=log_probs.cpu().numpy(),
+            entropy=entropy.cpu().numpy(),
+        )
+
+    def evaluate(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None,
+                 continuous_actions: torch.Tensor, discrete_actions: torch.Tensor
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Log-probs [n, c + b] and entropy [n] of stored actions under the current actor (with grad).
+
+        continuous_actions: raw samples [n, c]; discrete_actions: int [n, b]; allowed: float [n, sum(branches)].
+        """
+        mu, logits = self.actor.heads(obs, allowed)
+        parts: list[torch.Tensor] = []
+        continuous_entropy = None
+        if mu is not None:
+            log_sigma = self.actor.log_sigma.expand_as(mu)
+            parts.append(gaussian_log_prob(continuous_actions, mu, log_sigma))
+            continuous_entropy = gaussian_entropy(log_sigma)
+        discrete_entropies = []
+        for index, branch_logits in enumerate(logits):
+            probs = torch.softmax(branch_logits, dim=1)
+            parts.append(categorical_log_prob(probs, discrete_actions[:, index]).unsqueeze(1))
+            discrete_entropies.append(categorical_entropy(probs))
+        return torch.cat(parts, dim=1), combined_entropy(continuous_entropy, discrete_entropies)

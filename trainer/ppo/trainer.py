@@ -1,0 +1,206 @@
+"""PPOTrainer: turns trajectories into buffered experiences and runs the PPO update.
+
+One trainer per brain. The run loop calls ``process_trajectory`` for every finished or cut trajectory,
+then ``update`` whenever ``ready_to_update`` says the buffer holds more than buffer_size experiences.
+"""
+from __future__ import annotations
+
+from itertools import chain
+from typing import Any
+
+import numpy as np
+import torch
+
+from trainer.errors import ConfigError
+from trainer.ppo.buffer import Trajectory, UpdateBuffer
+from trainer.ppo.gae import gae
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
+from trainer.ppo.networks import Critic
+from trainer.ppo.policy import Policy
+from trainer.ppo.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
+from trainer.protocol.types import BehaviorSpec
+
+SUPPORTED_REWARD_SIGNALS = ("extrinsic",)
+ADVANTAGE_STD_EPSILON = 1e-10
+
+
+def _obs_key(index: int) -> str:
+    return f"obs_{index}"
+
+
+class PPOTrainer:
+    """PPO for one brain: ``policy`` acts, the critic estimates values, one Adam updates both."""
+
+    def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams,
+                 seed: int, device: str = "cpu"):
+        for name in hyperparams.reward_signals:
+            if name not in SUPPORTED_REWARD_SIGNALS:
+                raise ConfigError(
+                    f"reward_signals.{name} is not supported yet for behavior {brain_name!r}; "
+                    f"use only {list(SUPPORTED_REWARD_SIGNALS)}"
+                )
+        if not hyperparams.reward_signals:
+            raise ConfigError(f"behavior {brain_name!r} has no reward_signals; add an extrinsic block")
+        self.brain_name = brain_name
+        self.behavior_spec = behavior_spec
+        self.hyperparams = hyperparams
+        self.device = torch.device(device)
+        self.policy = Policy(behavior_spec, hyperparams, seed, device)
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed + 2)
+            self.critic = Critic(
+                behavior_spec.observation_specs, list(hyperparams.reward_signals), hyperparams
+            ).to(self.device)
+        trainable = [
+            p for p in chain(self.policy.actor.parameters(), self.critic.parameters()) if p.requires_grad
+        ]
+        self.optimizer = torch.optim.Adam(trainable, lr=hyperparams.learning_rate)
+        self.shuffle_generator = torch.Generator()
+        self.shuffle_generator.manual_seed(seed + 3)
+        self.buffer = UpdateBuffer()
+        self.step = 0
+
+    # ------------------------------------------------------------------ experience
+    def _tensors(self, arrays: list[np.ndarray]) -> list[torch.Tensor]:
+        return [torch.as_tensor(np.asarray(a, dtype=np.float32), device=self.device) for a in arrays]
+
+    def _value_estimates(self, traj: Trajectory) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+        """Current-critic values for obs [T] and next_obs, in one batch: (values [T] per signal, V(next))."""
+        both = [np.concatenate([o, n[None]], axis=0) for o, n in zip(traj.obs, traj.next_obs)]
+        with torch.inference_mode():
+            estimates = self.critic(self._tensors(both))
+        values = {name: v[:-1].cpu().numpy() for name, v in estimates.items()}
+        next_values = {name: float(v[-1]) for name, v in estimates.items()}
+        return values, next_values
+
+    def process_trajectory(self, traj: Trajectory) -> dict[str, float]:
+        """Normalise, estimate values, compute GAE per reward signal, and buffer the experiences."""
+        length = len(traj)
+        if self.hyperparams.normalize:
+            obs_tensors = self._tensors(traj.obs)
+            self.policy.actor.update_normalization(obs_tensors)
+            self.critic.update_normalization(obs_tensors)
+        values, next_values = self._value_estimates(traj)
+        terminal = traj.done and not traj.interrupted
+        fields: dict[str, np.ndarray] = {_obs_key(i): np.asarray(o, np.float32) for i, o in enumerate(traj.obs)}
+        advantages = []
+        stats: dict[str, float] = {}
+        for name, (gamma, strength) in self.hyperparams.reward_signals.items():
+            rewards = np.asarray(traj.rewards, dtype=np.float32) * np.float32(strength)
+            bootstrap = 0.0 if terminal else next_values[name]
+            advantage, returns = gae(rewards, values[name], bootstrap, gamma, self.hyperparams.lambd)
+            advantages.append(advantage)
+            fields[f"values:{name}"] = values[name]
+            fields[f"returns:{name}"] = returns
+            stats[f"Policy/{name.capitalize()} Value Estimate"] = float(np.mean(values[name]))
+        fields["advantages"] = np.mean(np.stack(advantages), axis=0).astype(np.float32)
+        fields["continuous_actions"] = np.asarray(traj.continuous_actions, np.float32).reshape(length, -1)
+        fields["discrete_actions"] = np.asarray(traj.discrete_actions, np.int64).reshape(length, -1)
+        fields["log_probs"] = np.asarray(traj.log_probs, np.float32).reshape(length, -1)
+        mask_width = sum(self.behavior_spec.action_spec.discrete_branches)
+        fields["action_masks"] = (
+            np.zeros((length, mask_width), dtype=bool) if traj.action_masks is None
+            else np.asarray(traj.action_masks, dtype=bool)
+        )
+        self.buffer.append(fields)
+        self.step += length
+        return stats
+
+    # ------------------------------------------------------------------ update
+    def ready_to_update(self) -> bool:
+        return len(self.buffer) > self.hyperparams.buffer_size
+
+    def current_schedule(self) -> tuple[float, float, float]:
+        """(learning rate, beta, epsilon) decayed to the current step."""
+        h = self.hyperparams
+        return (
+            decay(h.learning_rate_schedule, h.learning_rate, LEARNING_RATE_FLOOR, self.step, h.max_steps),
+            decay(h.beta_schedule, h.beta, BETA_FLOOR, self.step, h.max_steps),
+            decay(h.epsilon_schedule, h.epsilon, EPSILON_FLOOR, self.step, h.max_steps),
+        )
+
+    def _buffer_tensors(self) -> dict[str, Any]:
+        data = self.buffer.concatenated()
+        advantages = data["advantages"]
+        data["advantages"] = ((advantages - advantages.mean()) / (advantages.std() + ADVANTAGE_STD_EPSILON)
+                              ).astype(np.float32)
+        tensors = {key: torch.as_tensor(value, device=self.device) for key, value in data.items()}
+        tensors["allowed"] = (~tensors.pop("action_masks")).float()
+        return tensors
+
+    def _minibatch_loss(self, batch: dict[str, torch.Tensor], beta: float, epsilon: float
+                        ) -> tuple[torch.Tensor, dict[str, float]]:
+        n_obs = len(self.behavior_spec.observation_specs)
+        obs = [batch[_obs_key(i)] for i in range(n_obs)]
+        allowed = batch["allowed"] if self.behavior_spec.action_spec.discrete_branches else None
+        log_probs, entropy = self.policy.evaluate(
+            obs, allowed, batch["continuous_actions"], batch["discrete_actions"]
+        )
+        values = self.critic(obs)
+        names = list(values)
+        policy_term = policy_loss(batch["advantages"], log_probs, batch["log_probs"], epsilon)
+        value_term = value_loss(
+            values, {n: batch[f"values:{n}"] for n in names}, {n: batch[f"returns:{n}"] for n in names}, epsilon
+        )
+        loss = ppo_loss(policy_term, value_term, entropy, beta)
+        return loss, {
+            "Losses/Policy Loss": abs(policy_term.item()),
+            "Losses/Value Loss": value_term.item(),
+            "Policy/Entropy": entropy.mean().item(),
+        }
+
+    def update(self) -> dict[str, float]:
+        """num_epoch passes of shuffled minibatches over ALL buffered experiences; then clear the buffer."""
+        learning_rate, beta, epsilon = self.current_schedule()
+        for group in self.optimizer.param_groups:
+            group["lr"] = learning_rate
+        data = self._buffer_tensors()
+        length, batch_size = len(self.buffer), self.hyperparams.batch_size
+        collected: dict[str, list[float]] = {}
+        for _ in range(self.hyperparams.num_epoch):
+            order = torch.randperm(length, generator=self.shuffle_generator).to(self.device)
+            for start in range(0, (length // batch_size) * batch_size, batch_size):
+                index = order[start:start + batch_size]
+                loss, stats = self._minibatch_loss({k: v[index] for k, v in data.items()}, beta, epsilon)
+                self.optimizer.zero_grad()
+                loss.backward()
+                self.optimizer.step()
+                for key, value in stats.items():
+                    collected.setdefault(key, []).append(value)
+        self.buffer.clear()
+        result = {key: float(np.mean(values)) for key, values in collected.items()}
+        result.update({"Policy/Learning Rate": learning_rate, "Policy/Epsilon": epsilon, "Policy/Beta": beta})
+        return result
+
+    # ------------------------------------------------------------------ persistence
+    def state_dict(self) -> dict[str, Any]:
+        """checkpoint.pt content: ML-Agents' keys plus ``RNG`` (generator states as uint8 tensors).
+
+        Tensors are live references; save (or copy) before the next update.
+        """
+        return {
+            "Policy": self.policy.actor.state_dict(),
+            "global_step": {"step": torch.tensor(self.step, dtype=torch.int64)},
+            "Optimizer:value_optimizer": self.optimizer.state_dict(),
+            "Optimizer:critic": self.critic.state_dict(),
+            "RNG": {
+                "policy_sampling": self.policy.generator.get_state(),
+                "minibatch_shuffle": self.shuffle_generator.get_state(),
+            },
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.policy.actor.load_state_dict(state["Policy"])
+        self.critic.load_state_dict(state["Optimizer:critic"])
+        self.optimizer.load_state_dict(state["Optimizer:value_optimizer"])
+        self.step = int(state["global_step"]["step"])
+        rng = state.get("RNG")
+        if rng is not None:
+            self.policy.generator.set_state(rng["policy_sampling"])
+            self.shuffle_generator.set_state(rng["minibatch_shuffle"])
+
+    def export_onnx(self, path: str) -> None:
+        from trainer.artifacts.onnx_export import export_policy
+
+        export_policy(self.policy, path)
