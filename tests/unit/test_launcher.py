@@ -264,3 +264,14 @@ def test_directory_with_two_players_is_ambiguous(tmp_path):
     _make_file(tmp_path / "build" / "B.x86_64")
     with pytest.raises(EnvironmentNotFoundError, match=r"build/\*\.x86_64"):
         resolve_env_path(str(tmp_path / "build"), platform="linux")
+
+
+def test_log_folder_gives_the_log_path_when_the_command_has_none(tmp_path):
+    process = SimulatorProcess([sys.executable, "-c", "print('x')"], 2, log_folder=str(tmp_path), output_to_log=True)
+    assert process.log_path == str(tmp_path / "Player-2.log")
+    process.start()
+    assert process.wait_for_exit(10) and process.close() == 0
+    assert (tmp_path / "Player-2.log").read_text() == "x\n"
+    # an explicit -logFile in the command wins over log_folder
+    command = ["/b/G", "-logfile", "/elsewhere/u.log"]
+    assert SimulatorProcess(command, 0, log_folder=str(tmp_path)).log_path == "/elsewhere/u.log"

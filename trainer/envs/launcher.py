@@ -159,15 +159,18 @@ class SimulatorProcess:
     also append to it) and an executable's go to DEVNULL (Unity writes its own -logFile).
     """
 
-    def __init__(self, command: list[str], *, worker_id: int = 0, debug: bool = False,
-                 output_to_log: bool | None = None) -> None:
-        """``output_to_log``: append stdout/stderr to the -logFile; defaults to True for the stub."""
+    def __init__(self, command: list[str], worker_id: int = 0, *, log_folder: str | None = None,
+                 debug: bool = False, output_to_log: bool | None = None) -> None:
+        """``output_to_log``: append stdout/stderr to the log file; defaults to True for the stub.
+        The log file is the command's -logFile, else ``<log_folder>/Player-<worker_id>.log``."""
         self.command = list(command)
         self.worker_id = worker_id
         self.debug = debug
         self.is_stub = len(command) >= 5 and command[1:4] == ["-m", "unity_stub_env.cli", "--task"]
         self.name = f"stub task {command[4]}" if self.is_stub else os.path.basename(command[0])
         self.log_path = log_file_of(self.command)
+        if self.log_path is None and log_folder is not None:
+            self.log_path = player_log_path(log_folder, worker_id)
         self.output_to_log = self.is_stub if output_to_log is None else output_to_log
         self._process: subprocess.Popen | None = None
         self._log_handle: IO[bytes] | None = None

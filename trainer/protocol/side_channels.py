@@ -288,6 +288,7 @@ class SideChannelRouter:
                 )
         return incoming
 
+
 __all__ = [
     "ENGINE_CONFIG_CHANNEL_ID", "ENVIRONMENT_PARAMETERS_CHANNEL_ID", "FLOAT_PROPERTIES_CHANNEL_ID",
     "STATS_CHANNEL_ID", "TRAINING_ANALYTICS_CHANNEL_ID", "pack_messages", "unpack_messages",
