@@ -1,0 +1,90 @@
+"""``mlagents-like-learn``: the drop-in for ``mlagents-learn``.
+
+User errors (trainer.errors.UserError) become one line on stderr and exit code 2; a traceback
+only with --debug. SIGINT, SIGTERM, SIGQUIT and SIGUSR1 (what Slurm sends before a time limit)
+all stop training the same way Ctrl-C does: a final checkpoint and ONNX are written first.
+"""
+from __future__ import annotations
+
+import logging
+import platform
+import signal
+import sys
+
+LOGO = r"""
+            ┌─┐┌┐┌┌─┐┌─┐┌┐┌┌┬┐┌─┐   ┬  ┬┬┌─┌─┐
+ mlagents   ├─┤│││ ┬├┤ │││ │ └─┐───│  │├┴┐├┤
+            ┴ ┴┘└┘└─┘└─┘┘└┘ ┴ └─┘   ┴─┘┴┴ ┴└─┘
+"""
+
+logger = logging.getLogger("mlagents_like")
+
+
+class _GracefulStop(KeyboardInterrupt):
+    """Raised in the main thread by a termination signal; handled like Ctrl-C."""
+
+
+def _install_signal_handlers() -> None:
+    def handler(signum, _frame):
+        raise _GracefulStop(signal.Signals(signum).name)
+
+    for name in ("SIGTERM", "SIGQUIT", "SIGUSR1"):
+        sig = getattr(signal, name, None)
+        if sig is not None:
+            signal.signal(sig, handler)
+
+
+def setup_logging(debug: bool) -> None:
+    fmt = "%(asctime)s %(levelname)s [%(filename)s:%(lineno)d] %(message)s" if debug else "[%(levelname)s] %(message)s"
+    handler = logging.StreamHandler(sys.stdout)
+    handler.setFormatter(logging.Formatter(fmt))
+    root = logging.getLogger("mlagents_like")
+    root.handlers[:] = [handler]
+    root.setLevel(logging.DEBUG if debug else logging.INFO)
+    root.propagate = False
+
+
+def version_lines() -> list[str]:
+    import numpy
+    import torch
+
+    from trainer import __version__
+
+    return [
+        "Version information:",
+        f"  mlagents-like: {__version__},",
+        "  Communicator API: 1.5.0,",
+        f"  PyTorch: {torch.__version__},",
+        f"  NumPy: {numpy.__version__},",
+        f"  Python: {platform.python_version()}",
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    setup_logging(debug)
+    from trainer.errors import UserError
+
+    try:
+        from trainer.config.cli_args import parse_run_options
+
+        options = parse_run_options(argv)
+        print(LOGO)
+        for line in version_lines():
+            logger.info(line)
+        _install_signal_handlers()
+        from trainer.run import run_training
+
+        return run_training(options)
+    except UserError as err:
+        if debug:
+            logger.exception("error")
+        print(f"mlagents-like-learn: error: {err}", file=sys.stderr)
+        return err.exit_code
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,177 @@
+"""All simulator connections of a run, stepped together as one batch.
+
+One ``UnityEndpoint`` (gRPC server, one port) per worker, and for executables one
+``SimulatorProcess`` each. Every step sends all workers their actions first and only then waits
+for their replies, so N simulators run in parallel while the trainer waits once. The pool steps in
+lockstep (every worker every step): with seeds fixed, a run is repeatable, which ML-Agents' "go on
+when any worker replied" manager does not give.
+
+A worker whose simulator dies is restarted under the restart policy (spec §1.3); after a restart
+every worker is reset and the caller is told (``restarted``) so it drops partial trajectories.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+from trainer.envs.launcher import RestartPolicy, SimulatorProcess, build_launch_command, resolve_env_path
+from trainer.errors import SimulatorExitedError, UnityTimeOutError, UserError
+from trainer.protocol.server import UnityEndpoint
+from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
+
+logger = logging.getLogger("mlagents_like")
+
+DEFAULT_EDITOR_PORT = 5004
+
+
+@dataclass(frozen=True)
+class PoolSettings:
+    env_path: str | None
+    env_args: tuple[str, ...]
+    base_port: int
+    num_envs: int
+    num_areas: int
+    seed: int
+    timeout_wait: float
+    bind: str
+    no_graphics: bool
+    no_graphics_monitor: bool
+    log_folder: str | None
+    max_lifetime_restarts: int = 10
+    restarts_rate_limit_n: int = 1
+    restarts_rate_limit_period_s: float = 60
+    debug: bool = False
+
+
+@dataclass
+class PoolStep:
+    results: list[StepResult]
+    restarted: bool = False  # every worker was reset: drop in-progress trajectories
+
+
+class _Worker:
+    def __init__(self, worker_id: int, settings: PoolSettings, env_path: str | None):
+        self.worker_id = worker_id
+        self.settings = settings
+        self.env_path = env_path
+        self.port = settings.base_port + worker_id if env_path else DEFAULT_EDITOR_PORT
+        self.process: SimulatorProcess | None = None
+        self.endpoint: UnityEndpoint | None = None
+
+    def connect(self) -> None:
+        s = self.settings
+        if self.env_path:
+            cmd = build_launch_command(
+                self.env_path, self.worker_id, s.base_port, s.no_graphics, s.no_graphics_monitor,
+                s.log_folder, list(s.env_args), s.seed + self.worker_id, s.num_areas,
+            )
+            self.process = SimulatorProcess(cmd, self.worker_id, log_folder=s.log_folder, debug=s.debug)
+        is_alive = self.process.is_alive if self.process else None
+        describe = self.process.describe() if self.process else "the Unity Editor"
+        self.endpoint = UnityEndpoint(self.port, bind=s.bind, timeout_wait=s.timeout_wait,
+                                      is_alive=is_alive, describe=describe)
+        self.endpoint.start()  # bind before launching, so the simulator finds us listening
+        if self.process:
+            self.process.start()
+        else:
+            logger.info("Listening on port %d. Start training by pressing the Play button in the Unity Editor.",
+                        self.port)
+        init = self.endpoint.handshake(s.seed + self.worker_id, s.num_areas)
+        logger.info("Connected to Unity environment with package version %s and communication version %s",
+                    init.package_version, init.communication_version)
+
+    def close(self, timeout: float) -> None:
+        if self.endpoint is not None:
+            self.endpoint.close()
+        if self.process is not None:
+            self.process.close(timeout)
+        self.endpoint = None
+        self.process = None
+
+
+class EnvPool:
+    def __init__(self, settings: PoolSettings, initial_side_channel: Callable[[], bytes]):
+        """``initial_side_channel`` returns the bytes a fresh simulator needs with its first RESET
+        (engine configuration and current environment parameters)."""
+        if settings.env_path is None and settings.num_envs != 1:
+            raise UserError("--num-envs > 1 needs --env: the Unity Editor is a single environment.")
+        env_path = resolve_env_path(settings.env_path) if settings.env_path else None
+        self.settings = settings
+        self.workers = [_Worker(i, settings, env_path) for i in range(settings.num_envs)]
+        self._initial_side_channel = initial_side_channel
+        self._restarts = RestartPolicy(settings.max_lifetime_restarts, settings.restarts_rate_limit_n,
+                                       settings.restarts_rate_limit_period_s)
+
+    @property
+    def num_envs(self) -> int:
+        return len(self.workers)
+
+    def behavior_specs(self) -> dict[str, BehaviorSpec]:
+        specs: dict[str, BehaviorSpec] = {}
+        for w in self.workers:
+            if w.endpoint is not None:
+                specs.update(w.endpoint.behavior_specs)
+        return specs
+
+    def start(self) -> None:
+        try:
+            for w in self.workers:
+                w.connect()
+        except BaseException:
+            self.close()
+            raise
+
+    def reset(self, side_channel: bytes | list[bytes]) -> list[StepResult]:
+        chans = self._per_worker(side_channel)
+        for w, sc in zip(self.workers, chans):
+            w.endpoint.send_reset(sc)
+        return [w.endpoint.receive() for w in self.workers]
+
+    def step(self, actions: list[dict[str, ActionTuple]], side_channel: bytes | list[bytes]) -> PoolStep:
+        self.send_step(actions, side_channel)
+        return self.receive()
+
+    def send_step(self, actions: list[dict[str, ActionTuple]], side_channel: bytes | list[bytes]) -> None:
+        """Answer every worker now; the simulators step while the trainer does other work."""
+        chans = self._per_worker(side_channel)
+        for w, act, sc in zip(self.workers, actions, chans):
+            w.endpoint.send_step(act, sc)
+
+    def receive(self) -> PoolStep:
+        """Wait for every worker's next message (restarting a dead simulator if allowed)."""
+        results: list[StepResult] = []
+        failed: list[tuple[_Worker, Exception]] = []
+        for w in self.workers:
+            try:
+                results.append(w.endpoint.receive())
+            except (SimulatorExitedError, UnityTimeOutError) as err:
+                failed.append((w, err))
+        if not failed:
+            return PoolStep(results)
+        for w, err in failed:
+            if w.process is None or not self._restarts.allow_restart(time.monotonic()):
+                raise err
+            logger.warning("Worker %d failed (%s); restarting it and resetting all environments.",
+                           w.worker_id, err)
+            self._restart_process(w)
+        # every worker now waits for an answer (the healthy ones to their last message, the
+        # restarted ones on their first RESET): reset them all with a fresh configuration
+        return PoolStep(self.reset([self._initial_side_channel()] * self.num_envs), restarted=True)
+
+    def _restart_process(self, failed: _Worker) -> None:
+        failed.close(timeout=2.0)
+        failed.connect()
+
+    def _per_worker(self, side_channel: bytes | list[bytes]) -> list[bytes]:
+        if isinstance(side_channel, (bytes, bytearray)):
+            return [bytes(side_channel)] * self.num_envs
+        return list(side_channel)
+
+    def close(self) -> None:
+        for w in self.workers:
+            try:
+                w.close(timeout=self.settings.timeout_wait)
+            except Exception as err:  # closing must never hide the original error
+                logger.debug("closing worker %d: %s", w.worker_id, err)
