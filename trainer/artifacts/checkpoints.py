@@ -6,7 +6,6 @@ A checkpoint holds only tensors, numbers, strings, dicts and lists, so it loads 
 from __future__ import annotations
 
 import os
-import pickle
 import tempfile
 from typing import Any
 
@@ -58,7 +57,7 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise UserError(f"checkpoint {os.fspath(path)!r} does not exist; {_RECOVERY_HINT}")
     try:
         state = torch.load(path, weights_only=True, map_location="cpu")
-    except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, OSError, AttributeError) as error:
+    except Exception as error:  # any failure to unpickle means the file cannot be used
         raise UserError(
             f"checkpoint {os.fspath(path)!r} is corrupt or not a trainer checkpoint "
             f"({type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}); {_RECOVERY_HINT}"

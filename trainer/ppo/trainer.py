@@ -29,6 +29,11 @@ def _obs_key(index: int) -> str:
     return f"obs_{index}"
 
 
+def normalize_advantages(advantages: np.ndarray) -> np.ndarray:
+    """(A - mean) / (std + 1e-10) over the whole buffer. float [N] -> float32 [N]."""
+    return ((advantages - advantages.mean()) / (advantages.std() + ADVANTAGE_STD_EPSILON)).astype(np.float32)
+
+
 class PPOTrainer:
     """PPO for one brain: ``policy`` acts, the critic estimates values, one Adam updates both."""
 
@@ -122,9 +127,7 @@ class PPOTrainer:
 
     def _buffer_tensors(self) -> dict[str, Any]:
         data = self.buffer.concatenated()
-        advantages = data["advantages"]
-        data["advantages"] = ((advantages - advantages.mean()) / (advantages.std() + ADVANTAGE_STD_EPSILON)
-                              ).astype(np.float32)
+        data["advantages"] = normalize_advantages(data["advantages"])
         tensors = {key: torch.as_tensor(value, device=self.device) for key, value in data.items()}
         tensors["allowed"] = (~tensors.pop("action_masks")).float()
         return tensors

@@ -1,0 +1,81 @@
+"""checkpoint.pt: atomic round trips and refusing anything that is not plain tensors and containers."""
+from __future__ import annotations
+
+import os
+import pickle
+
+import pytest
+import torch
+
+import trainer.artifacts.checkpoints as checkpoints
+from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
+from trainer.errors import UserError
+
+STATE = {
+    "Policy": {"weight": torch.arange(6.0).reshape(2, 3)},
+    "global_step": {"step": torch.tensor(42)},
+    "RNG": {"policy_sampling": torch.Generator().manual_seed(1).get_state()},
+    "notes": ["a", 1, 2.5, None, True],
+}
+
+
+def test_round_trip(tmp_path):
+    path = tmp_path / "Ball" / "checkpoint.pt"  # the folder is created
+    save_checkpoint(path, STATE)
+    loaded = load_checkpoint(path)
+    assert torch.equal(loaded["Policy"]["weight"], STATE["Policy"]["weight"])
+    assert int(loaded["global_step"]["step"]) == 42
+    assert torch.equal(loaded["RNG"]["policy_sampling"], STATE["RNG"]["policy_sampling"])
+    assert loaded["notes"] == ["a", 1, 2.5, None, True]
+    assert os.listdir(path.parent) == ["checkpoint.pt"]
+
+
+def test_failure_mid_write_keeps_the_old_file(tmp_path, monkeypatch):
+    path = tmp_path / "checkpoint.pt"
+    save_checkpoint(path, STATE)
+    original = path.read_bytes()
+
+    def write_half_then_fail(obj, handle):
+        handle.write(b"half a checkpoint")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(checkpoints.torch, "save", write_half_then_fail)
+    with pytest.raises(OSError, match="disk full"):
+        save_checkpoint(path, {"Policy": {}})
+    assert path.read_bytes() == original
+    assert os.listdir(tmp_path) == ["checkpoint.pt"]
+
+
+class Malicious:
+    def __reduce__(self):
+        return (os.system, ("touch pwned-marker",))
+
+
+def test_malicious_pickle_is_refused(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = tmp_path / "checkpoint.pt"
+    torch.save({"Policy": Malicious()}, path)  # torch.save pickles the __reduce__ payload
+    with pytest.raises(UserError, match="corrupt or not a trainer checkpoint"):
+        load_checkpoint(path)
+    assert not (tmp_path / "pwned-marker").exists()
+    path.write_bytes(pickle.dumps(Malicious(), protocol=2))
+    with pytest.raises(UserError):
+        load_checkpoint(path)
+    assert not (tmp_path / "pwned-marker").exists()
+
+
+def test_missing_and_corrupt_files_name_the_path_and_the_fix(tmp_path):
+    missing = tmp_path / "nothing.pt"
+    with pytest.raises(UserError, match="does not exist") as error:
+        load_checkpoint(missing)
+    assert str(missing) in str(error.value) and "--force" in str(error.value) and "--run-id" in str(error.value)
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_bytes(b"\x00not a checkpoint at all")
+    with pytest.raises(UserError, match="corrupt") as error:
+        load_checkpoint(garbage)
+    assert str(garbage) in str(error.value) and "--force" in str(error.value)
+    truncated = tmp_path / "truncated.pt"
+    save_checkpoint(truncated, STATE)
+    truncated.write_bytes(truncated.read_bytes()[:40])
+    with pytest.raises(UserError, match="corrupt"):
+        load_checkpoint(truncated)
