@@ -1,0 +1,29 @@
+"""The task registry: ``TASKS`` maps a task name to its class; ``make_task`` builds one.
+
+Usable without any protocol (e.g. by bench/ to time raw physics)::
+
+    task = make_task("ball3d", num_areas=1, seed=0)
+    task.reset()
+    result = task.step(np.random.uniform(-1, 1, (task.num_agents, 2)), np.zeros((task.num_agents, 0)))
+"""
+from __future__ import annotations
+
+from unity_stub_env.tasks.ball3d import Ball3DTask
+from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
+from unity_stub_env.tasks.basic import BasicTask
+
+TASKS: dict[str, type[Task]] = {
+    BasicTask.name: BasicTask,
+    Ball3DTask.name: Ball3DTask,
+}
+
+
+def make_task(name: str, num_areas: int = 1, seed: int = 0,
+              env_params: EnvironmentParameters | None = None) -> Task:
+    """Build the task ``name`` with ``num_areas`` areas; KeyError names the known tasks."""
+    if name not in TASKS:
+        raise KeyError(f"Unknown task {name!r}; known tasks: {', '.join(sorted(TASKS))}")
+    return TASKS[name](num_areas=num_areas, seed=seed, env_params=env_params)
+
+
+__all__ = ["TASKS", "make_task", "Task", "TaskStep", "EnvironmentParameters", "BasicTask", "Ball3DTask"]

@@ -1,0 +1,147 @@
+"""Unity's step semantics for one behavior: decisions, actions by position, episodes, stats.
+
+One decision step, as the Academy runs it with a DecisionRequester on every agent:
+
+1. ``collect_infos`` - what Unity puts in the next message: first the done infos of agents
+   whose episode ended since the last message (in the order they ended), then one decision
+   request per agent (agent order) with the reward collected since its last decision. A
+   finished agent therefore appears twice in one message: its terminal info (old episode id)
+   and the first info of its new episode (a new id).
+2. ``apply_actions`` - the trainer's actions, matched BY POSITION to the decision requests.
+3. ``advance`` - ``decision_period`` control steps; agents that finish mid-way are reset at
+   once (Unity's EndEpisode -> OnEpisodeBegin) and act with zero actions until the next
+   decision, as Unity's ActuatorManager.ResetData leaves them.
+
+``environment_reset`` is the RESET command: every agent starts a new episode (new ids), no
+terminal infos are sent, pending rewards are dropped.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Sequence
+
+import numpy as np
+
+from protos.communicator_objects import agent_action_pb2, agent_info_pb2
+from unity_stub_env.agents import EpisodeIdCounter, build_agent_infos
+from unity_stub_env.tasks.base import Stat, Task
+
+logger = logging.getLogger("unity_stub_env")
+
+
+class ActionCountError(RuntimeError):
+    """The trainer sent a different number of actions than there were decision requests."""
+
+
+class Academy:
+    def __init__(self, task: Task, decision_period: int | None = None) -> None:
+        self.task = task
+        self.decision_period = int(decision_period or task.decision_period)
+        if self.decision_period < 1:
+            raise ValueError(f"decision_period must be >= 1, got {self.decision_period}")
+        self.behavior_key = f"{task.behavior_name}?team=0"
+        self.episode_counter = EpisodeIdCounter()
+        n = task.num_agents
+        self.episode_ids = np.zeros(n, dtype=np.int64)
+        self.pending_reward = np.zeros(n, dtype=np.float32)
+        self.continuous = np.zeros((n, task.action_spec.continuous_size), dtype=np.float32)
+        self.discrete = np.zeros((n, len(task.action_spec.discrete_branches)), dtype=np.int32)
+        self.pending_done_infos: list[agent_info_pb2.AgentInfoProto] = []
+        self.pending_stats: list[Stat] = []
+        self.completed_episodes = 0
+        self.environment_reset()
+
+    # ----------------------------------------------------------------------------------------
+    def environment_reset(self) -> None:
+        """The RESET command: every agent begins a new episode with a fresh episode id."""
+        self.task.reset()
+        self.episode_ids[:] = self.episode_counter.take(self.task.num_agents)
+        self.pending_reward[:] = 0.0
+        self.continuous[:] = 0.0
+        self.discrete[:] = 0
+        self.pending_done_infos.clear()
+
+    def collect_infos(self) -> list[agent_info_pb2.AgentInfoProto]:
+        """Terminal infos since the last message, then one decision request per agent."""
+        task = self.task
+        decisions = build_agent_infos(
+            task.observation_specs, task.observe(), self.pending_reward, self.episode_ids,
+            done=False, action_mask=task.action_mask(),
+        )
+        infos = self.pending_done_infos + decisions
+        self.pending_done_infos = []
+        self.pending_reward[:] = 0.0
+        return infos
+
+    def take_stats(self) -> list[Stat]:
+        stats, self.pending_stats = self.pending_stats, []
+        return stats
+
+    def apply_actions(self, actions: Sequence[agent_action_pb2.AgentActionProto]) -> None:
+        """Actions for the decision requests of the last message, by position.
+
+        An empty list means "no actions" (the agents act with zeros), as in Unity.
+        """
+        n = self.task.num_agents
+        if len(actions) == 0:
+            self.continuous[:] = 0.0
+            self.discrete[:] = 0
+            return
+        if len(actions) != n:
+            raise ActionCountError(
+                f"The trainer sent {len(actions)} actions for behavior {self.behavior_key!r} but "
+                f"{n} agents requested a decision; it must send one action per non-done agent info, "
+                "in the same order."
+            )
+        spec = self.task.action_spec
+        if spec.continuous_size:
+            self.continuous[:] = _action_rows([a.continuous_actions for a in actions], spec.continuous_size,
+                                              "continuous", np.float32)
+        if spec.discrete_branches:
+            self.discrete[:] = _action_rows([a.discrete_actions for a in actions], len(spec.discrete_branches),
+                                            "discrete", np.int32)
+
+    def advance(self) -> None:
+        """Run ``decision_period`` control steps; finished agents are reset on the spot."""
+        task = self.task
+        restarted = np.zeros(task.num_agents, dtype=bool)
+        for _ in range(self.decision_period):
+            result = task.step(self.continuous, self.discrete)
+            if task.sets_reward:
+                self.pending_reward[:] = result.rewards
+            else:
+                self.pending_reward += result.rewards
+            self.pending_stats.extend(result.stats)
+            done = result.done & ~restarted
+            if done.any():
+                self._end_episodes(done, result.interrupted)
+                restarted |= done
+
+    def _end_episodes(self, done: np.ndarray, interrupted: np.ndarray) -> None:
+        """Queue the terminal infos of ``done`` [n] agents, then start their next episode."""
+        task = self.task
+        observations = [obs[done] for obs in task.observe()]
+        self.pending_done_infos.extend(build_agent_infos(
+            task.observation_specs, observations, self.pending_reward[done], self.episode_ids[done],
+            done=True, interrupted=interrupted[done],
+        ))
+        finished = int(done.sum())
+        self.completed_episodes += finished
+        if self.completed_episodes // 100 != (self.completed_episodes - finished) // 100:
+            logger.info("%d episodes completed", self.completed_episodes)
+        self.pending_reward[done] = 0.0
+        task.reset(done)
+        self.episode_ids[done] = self.episode_counter.take(finished)
+        self.continuous[done] = 0.0
+        self.discrete[done] = 0
+
+
+def _action_rows(rows: list, width: int, kind: str, dtype) -> np.ndarray:
+    """[n, width] array from n repeated proto fields; raises ActionCountError on a bad width."""
+    widths = {len(row) for row in rows}
+    if widths != {width}:
+        raise ActionCountError(
+            f"The trainer sent {kind} actions of length(s) {sorted(widths)} but the action spec "
+            f"has {width} {kind} action(s) per agent."
+        )
+    return np.array([list(row) for row in rows], dtype=dtype)

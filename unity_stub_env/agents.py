@@ -1,0 +1,95 @@
+"""Agent-side bookkeeping as Unity's ``Agent`` does it: episode ids and AgentInfoProto building.
+
+Episode ids come from one process-wide counter (Unity's ``EpisodeIdCounter``): every episode
+start, for any agent, takes the next integer, so an id never repeats within one connection.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from protos.communicator_objects import (
+    agent_info_pb2,
+    brain_parameters_pb2,
+    observation_pb2,
+    space_type_pb2,
+)
+from trainer.protocol.types import ActionSpec, ObservationSpec
+
+
+class EpisodeIdCounter:
+    """Hands out increasing episode ids, starting at 0 like Unity's counter."""
+
+    def __init__(self) -> None:
+        self._next = 0
+
+    def take(self, count: int) -> np.ndarray:
+        """int64 [count]: the next ``count`` ids, in agent order."""
+        ids = np.arange(self._next, self._next + count, dtype=np.int64)
+        self._next += count
+        return ids
+
+
+def build_agent_infos(
+    observation_specs: Sequence[ObservationSpec],
+    observations: Sequence[np.ndarray],
+    rewards: np.ndarray,
+    episode_ids: np.ndarray,
+    done: bool,
+    interrupted: np.ndarray | None = None,
+    action_mask: np.ndarray | None = None,
+) -> list[agent_info_pb2.AgentInfoProto]:
+    """One AgentInfoProto per row, as Unity's ``PutObservations`` would write them.
+
+    observations[i]: float32 [k, *observation_specs[i].shape]; rewards float32 [k];
+    episode_ids int [k]; interrupted bool [k] (max_step_reached, only with done);
+    action_mask bool [k, sum(branches)] with True = forbidden, or None.
+    """
+    count = len(episode_ids)
+    flat_obs = [np.asarray(obs, dtype=np.float32).reshape(count, -1).tolist() for obs in observations]
+    reward_list = np.asarray(rewards, dtype=np.float32).tolist()
+    id_list = np.asarray(episode_ids).tolist()
+    interrupted_list = (np.asarray(interrupted, dtype=bool).tolist() if interrupted is not None
+                        else [False] * count)
+    mask_list = np.asarray(action_mask, dtype=bool).tolist() if action_mask is not None else None
+    spec_fields = [(list(spec.shape), [int(p) for p in spec.dimension_property],
+                    int(spec.observation_type), spec.name) for spec in observation_specs]
+    infos = []
+    for row in range(count):
+        info = agent_info_pb2.AgentInfoProto(
+            reward=reward_list[row], done=done, max_step_reached=done and interrupted_list[row],
+            id=id_list[row],
+        )
+        if mask_list is not None:
+            info.action_mask.extend(mask_list[row])
+        for sensor, (shape, props, obs_type, name) in enumerate(spec_fields):
+            obs = info.observations.add()
+            obs.shape.extend(shape)
+            obs.compression_type = observation_pb2.NONE
+            obs.float_data.data.extend(flat_obs[sensor][row])
+            obs.dimension_properties.extend(props)
+            obs.observation_type = obs_type
+            obs.name = name
+        infos.append(info)
+    return infos
+
+
+def build_brain_parameters(behavior_key: str, action_spec: ActionSpec) -> brain_parameters_pb2.BrainParametersProto:
+    """BrainParametersProto for ``behavior_key`` (the full ``Name?team=0``, as Unity sends it).
+
+    The deprecated vector_action_* fields are filled the way a Unity scene upgraded from the
+    old API carries them (continuous: [size]; discrete: the branch sizes); trainers that
+    understand ``action_spec`` (comm >= 1.3) ignore them.
+    """
+    proto = brain_parameters_pb2.BrainParametersProto(brain_name=behavior_key, is_training=True)
+    proto.action_spec.num_continuous_actions = action_spec.continuous_size
+    proto.action_spec.num_discrete_actions = len(action_spec.discrete_branches)
+    proto.action_spec.discrete_branch_sizes.extend(action_spec.discrete_branches)
+    if action_spec.continuous_size > 0:
+        proto.vector_action_space_type_deprecated = space_type_pb2.continuous
+        proto.vector_action_size_deprecated.append(action_spec.continuous_size)
+    else:
+        proto.vector_action_space_type_deprecated = space_type_pb2.discrete
+        proto.vector_action_size_deprecated.extend(action_spec.discrete_branches)
+    return proto

@@ -1,0 +1,139 @@
+"""``unity-stub-env``: run a stub task as if it were a Unity player built with ML-Agents.
+
+    unity-stub-env --task NAME --mlagents-port P [-nographics] [-batchmode] [-logFile F]
+                   [--num-areas N] [--seed S] [--decision-period K] [--connect-timeout T]
+    unity-stub-env --list
+
+Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
+0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
+--connect-timeout, an incompatible trainer or a protocol error; 2 bad command line.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+
+from unity_stub_env.academy import Academy, ActionCountError
+from unity_stub_env.agents import build_brain_parameters
+from unity_stub_env.communicator import RpcCommunicator, SessionEnd, SideChannelState, encode_stats
+from unity_stub_env.tasks import TASKS, EnvironmentParameters, make_task
+
+logger = logging.getLogger("unity_stub_env")
+_UNITY_FLAGS = {"-logfile": "-logFile", "-nographics": "-nographics", "-batchmode": "-batchmode"}
+COMMAND_RESET = 1
+COMMAND_QUIT = 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="unity-stub-env", allow_abbrev=False,
+        description="A headless simulator that trains against any ML-Agents (comm API 1.5.0) trainer.")
+    parser.add_argument("--task", help=f"task to simulate: {', '.join(sorted(TASKS))}")
+    parser.add_argument("--mlagents-port", type=int, default=None,
+                        help="port of the trainer's gRPC server (a Unity player does not train without it)")
+    parser.add_argument("--num-areas", type=int, default=None, help="override the trainer's num_areas")
+    parser.add_argument("--seed", type=int, default=None, help="override the trainer's seed")
+    parser.add_argument("--decision-period", type=int, default=None,
+                        help="control steps between decisions (default: the task's)")
+    parser.add_argument("--connect-timeout", type=float, default=60.0,
+                        help="seconds to keep retrying the connection to the trainer (default 60)")
+    parser.add_argument("--list", action="store_true", help="list the tasks with their specs and exit")
+    parser.add_argument("-logFile", dest="log_file", default=None, help="write the log here ('-' = stdout)")
+    parser.add_argument("-nographics", action="store_true", help="accepted; the stub never renders")
+    parser.add_argument("-batchmode", action="store_true", help="accepted; the stub is always headless")
+    return parser
+
+
+def _normalise_unity_flags(argv: list[str]) -> list[str]:
+    """Unity reads its own flags case-insensitively (``-logfile`` works too)."""
+    return [_UNITY_FLAGS.get(arg.lower(), arg) if arg.startswith("-") and not arg.startswith("--") else arg
+            for arg in argv]
+
+
+def _configure_logging(log_file: str | None) -> None:
+    if log_file in (None, "-"):
+        handler: logging.Handler = logging.StreamHandler(sys.stdout if log_file == "-" else sys.stderr)
+    else:
+        handler = logging.FileHandler(log_file, mode="a")
+    handler.setFormatter(logging.Formatter("%(asctime)s [%(levelname)s] %(message)s"))
+    logger.handlers[:] = [handler]
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+
+
+def main(argv: list[str] | None = None) -> int:
+    args, unknown = build_parser().parse_known_args(_normalise_unity_flags(list(sys.argv[1:] if argv is None else argv)))
+    if args.list:
+        for task_class in TASKS.values():
+            print(task_class.describe())
+        return 0
+    if args.task not in TASKS:
+        print(f"unity-stub-env: unknown or missing --task {args.task!r}; known tasks: "
+              f"{', '.join(sorted(TASKS))} (see --list).", file=sys.stderr)
+        return 2
+    if args.mlagents_port is None:
+        print("unity-stub-env: no --mlagents-port given. A Unity player started without it does not "
+              "train; pass the trainer's port, e.g. --mlagents-port 5005.", file=sys.stderr)
+        return 2
+    _configure_logging(args.log_file)
+    if unknown:
+        logger.info("Ignoring unknown flags: %s", " ".join(unknown))
+    communicator = RpcCommunicator(args.mlagents_port, args.connect_timeout)
+    signal.signal(signal.SIGTERM, communicator.request_stop)
+    signal.signal(signal.SIGINT, communicator.request_stop)
+    try:
+        run_session(communicator, args)
+    except SessionEnd as end:
+        (logger.info if end.exit_code == 0 else logger.error)("%s", end)
+        if end.exit_code and args.log_file is not None:
+            print(f"unity-stub-env: {end}", file=sys.stderr)
+        return end.exit_code
+    except ActionCountError as error:
+        logger.error("%s", error)
+        if args.log_file is not None:
+            print(f"unity-stub-env: {error}", file=sys.stderr)
+        communicator.close(send_closing=True)
+        return 1
+    finally:
+        logging.shutdown()
+    return 0
+
+
+def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None:
+    """Handshake, build the task from the trainer's seed/num_areas, then step until told to stop."""
+    communicator.connect()
+    init_input, first_input = communicator.initialize()
+    seed = args.seed if args.seed is not None else init_input.seed
+    num_areas = args.num_areas if args.num_areas is not None else max(init_input.num_areas, 1)
+    env_params = EnvironmentParameters()
+    side_channels = SideChannelState(env_params)
+    side_channels.apply(first_input.side_channel)
+    if first_input.command == COMMAND_QUIT:
+        communicator.close(send_closing=False)
+        raise SessionEnd("The trainer sent QUIT.", 0)
+    task = make_task(args.task, num_areas=num_areas, seed=seed, env_params=env_params)
+    academy = Academy(task, args.decision_period)  # construction is the first RESET
+    logger.info("Task %s: behavior %s, %d agents (%d areas), seed %d, decision period %d",
+                task.name, academy.behavior_key, task.num_agents, num_areas, seed, academy.decision_period)
+    brain_parameters = build_brain_parameters(academy.behavior_key, task.action_spec)
+    while True:
+        infos = academy.collect_infos()
+        rl_input = communicator.exchange(academy.behavior_key, infos, brain_parameters,
+                                         encode_stats(academy.take_stats()))
+        side_channels.apply(rl_input.side_channel)
+        if rl_input.command == COMMAND_QUIT:
+            communicator.close(send_closing=False)
+            raise SessionEnd("The trainer sent QUIT.", 0)
+        if rl_input.command == COMMAND_RESET:
+            logger.info("Environment reset by the trainer")
+            academy.environment_reset()
+            continue
+        actions = rl_input.agent_actions.get(academy.behavior_key)
+        academy.apply_actions(list(actions.value) if actions is not None else [])
+        academy.advance()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

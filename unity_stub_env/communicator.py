@@ -1,0 +1,241 @@
+"""The gRPC side of a Unity player: a CLIENT that calls ``Exchange`` like ``RpcCommunicator.cs``.
+
+Handshake (spec 1.5): M1 carries the academy's init output (no brain parameters, no rl_output);
+the answer holds the trainer's seed, num_areas and versions. M2 is a bare status-200 header;
+its answer is the first RESET. Every later message carries ``rl_output`` (agent infos keyed by
+``Behavior?team=0`` plus side-channel bytes) and, the first time a behavior is sent with at
+least one agent info, its ``brain_parameters``. A non-200 answer or the QUIT command ends the
+session; ``request_stop`` (SIGTERM/SIGINT) makes the next wait send one status-400 message.
+"""
+from __future__ import annotations
+
+import logging
+import time
+import uuid
+
+import grpc
+
+from protos.communicator_objects import (
+    capabilities_pb2,
+    header_pb2,
+    unity_input_pb2,
+    unity_message_pb2,
+    unity_output_pb2,
+    unity_rl_initialization_output_pb2,
+)
+from protos.communicator_objects.unity_to_external_pb2_grpc import UnityToExternalProtoStub
+from trainer.protocol import side_channels as sc
+from unity_stub_env.tasks.base import EnvironmentParameters, Stat
+
+logger = logging.getLogger("unity_stub_env")
+
+ACADEMY_NAME = "AcademySingleton"
+UNITY_COMMUNICATION_VERSION = "1.5.0"
+UNITY_PACKAGE_VERSION = "3.0.0"
+STATUS_OK = 200
+STATUS_CLOSING = 400
+_CHANNEL_OPTIONS = [
+    ("grpc.max_send_message_length", -1),
+    ("grpc.max_receive_message_length", -1),
+    ("grpc.initial_reconnect_backoff_ms", 100),
+    ("grpc.min_reconnect_backoff_ms", 100),
+    ("grpc.max_reconnect_backoff_ms", 1000),
+]
+_POLL_S = 0.2
+_STOP_GRACE_S = 2.0
+_CLOSE_TIMEOUT_S = 3.0
+
+
+class SessionEnd(Exception):
+    """The session is over. ``exit_code`` 0 = the trainer or a signal ended it cleanly."""
+
+    def __init__(self, message: str, exit_code: int = 0) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
+
+
+def all_capabilities() -> capabilities_pb2.UnityRLCapabilitiesProto:
+    return capabilities_pb2.UnityRLCapabilitiesProto(
+        baseRLCapabilities=True, concatenatedPngObservations=True, compressedChannelMapping=True,
+        hybridActions=True, trainingAnalytics=True, variableLengthObservation=True,
+        multiAgentGroups=True,
+    )
+
+
+def communication_versions_compatible(unity_version: str, trainer_version: str) -> bool:
+    """Unity's semantic check: major 0 needs equal major.minor, otherwise equal majors.
+
+    A version that does not parse as dot-separated integers is incompatible.
+    """
+    try:
+        unity = [int(part) for part in unity_version.split(".")]
+        trainer = [int(part) for part in trainer_version.split(".")]
+    except ValueError:
+        return False
+    if len(unity) < 2 or len(trainer) < 2:
+        return False
+    if unity[0] == 0:
+        return unity[:2] == trainer[:2]
+    return unity[0] == trainer[0]
+
+
+class RpcCommunicator:
+    """One connection to a trainer at ``localhost:port``; Unity is the caller of every RPC."""
+
+    def __init__(self, port: int, connect_timeout: float = 60.0) -> None:
+        self.address = f"localhost:{port}"
+        self.connect_timeout = float(connect_timeout)
+        self.stop_requested = False
+        self._channel: grpc.Channel | None = None
+        self._stub: UnityToExternalProtoStub | None = None
+        self._sent_brain_keys: set[str] = set()
+
+    def request_stop(self, *_args) -> None:
+        """Signal-handler safe: only sets a flag the waiting loop checks."""
+        self.stop_requested = True
+
+    # Connection and handshake ---------------------------------------------------------------
+    def connect(self) -> None:
+        """Open the channel, retrying until ``connect_timeout``; SessionEnd(exit 1) if it fails."""
+        self._channel = grpc.insecure_channel(self.address, options=_CHANNEL_OPTIONS)
+        self._stub = UnityToExternalProtoStub(self._channel)
+        ready = grpc.channel_ready_future(self._channel)
+        deadline = time.monotonic() + self.connect_timeout
+        while True:
+            try:
+                ready.result(timeout=min(_POLL_S, max(deadline - time.monotonic(), 0.001)))
+                return
+            except grpc.FutureTimeoutError:
+                if self.stop_requested:
+                    raise SessionEnd("Stopped by a signal before the trainer answered.", 0) from None
+                if time.monotonic() >= deadline:
+                    ready.cancel()
+                    raise SessionEnd(
+                        f"Could not connect to a trainer at {self.address} within "
+                        f"{self.connect_timeout:g} s. Start the trainer first (it listens on that port) "
+                        "or pass the port it uses with --mlagents-port; raise --connect-timeout if "
+                        "the trainer starts slowly.", 1) from None
+
+    def initialize(self):
+        """Send M1 and M2. Returns (init input from M1's answer, rl_input of M2's answer)."""
+        academy = unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
+            name=ACADEMY_NAME, communication_version=UNITY_COMMUNICATION_VERSION,
+            package_version=UNITY_PACKAGE_VERSION, capabilities=all_capabilities(),
+        )
+        first = self._exchange_raw(_wrap(unity_output_pb2.UnityOutputProto(rl_initialization_output=academy)))
+        init_input = first.unity_input.rl_initialization_input
+        trainer_version = init_input.communication_version
+        if not communication_versions_compatible(UNITY_COMMUNICATION_VERSION, trainer_version):
+            self.close(send_closing=True)
+            raise SessionEnd(
+                f"The trainer at {self.address} speaks communication API {trainer_version!r}, which is "
+                f"incompatible with this simulator's {UNITY_COMMUNICATION_VERSION}. Use a trainer for "
+                "ML-Agents Release 22 (communication API 1.x).", 1)
+        if trainer_version.split(".")[:2] != UNITY_COMMUNICATION_VERSION.split(".")[:2]:
+            logger.warning("The trainer's communication API %s differs from %s at the minor level; "
+                           "some features may not work.", trainer_version, UNITY_COMMUNICATION_VERSION)
+        logger.info("Connected to trainer at %s (package version %s, communication version %s)",
+                    self.address, init_input.package_version, trainer_version)
+        second = self._exchange_raw(_wrap(None))
+        return init_input, second.unity_input.rl_input
+
+    # Regular exchanges -----------------------------------------------------------------------
+    def exchange(self, behavior_key: str, infos: list, brain_parameters, side_channel: bytes):
+        """Send one step's agent infos; returns the trainer's ``rl_input``.
+
+        ``brain_parameters`` is attached only the first time ``behavior_key`` is sent with at
+        least one agent info. Raises SessionEnd on a non-200 answer, QUIT or a lost trainer.
+        """
+        output = unity_output_pb2.UnityOutputProto()
+        output.rl_output.agentInfos[behavior_key].value.extend(infos)
+        output.rl_output.side_channel = side_channel
+        first_time = behavior_key not in self._sent_brain_keys and len(infos) > 0
+        if first_time:
+            output.rl_initialization_output.brain_parameters.append(brain_parameters)
+        answer = self._exchange_raw(_wrap(output))
+        if first_time:
+            self._sent_brain_keys.add(behavior_key)
+        return answer.unity_input.rl_input
+
+    def _exchange_raw(self, message: unity_message_pb2.UnityMessageProto) -> unity_message_pb2.UnityMessageProto:
+        future = self._stub.Exchange.future(message)
+        stop_deadline = None
+        while True:
+            try:
+                answer = future.result(timeout=_POLL_S)
+                break
+            except grpc.FutureTimeoutError:
+                if self.stop_requested and stop_deadline is None:
+                    stop_deadline = time.monotonic() + _STOP_GRACE_S
+                if stop_deadline is not None and time.monotonic() >= stop_deadline:
+                    future.cancel()
+                    self.close(send_closing=True)
+                    raise SessionEnd("Stopped by a signal; sent status 400 to the trainer.", 0) from None
+            except grpc.RpcError as error:
+                self._close_channel()
+                raise SessionEnd(f"The trainer at {self.address} went away ({error.code().name}); "
+                                 "quitting like a Unity player does.", 0) from None
+        if answer.header.status != STATUS_OK:
+            self._close_channel()
+            raise SessionEnd(f"The trainer closed the session (status {answer.header.status}).", 0)
+        if self.stop_requested:
+            self.close(send_closing=True)
+            raise SessionEnd("Stopped by a signal; sent status 400 to the trainer.", 0)
+        return answer
+
+    def close(self, send_closing: bool) -> None:
+        """Like Unity's ``Dispose``: one status-400 message (answer ignored), then shut down."""
+        if send_closing and self._stub is not None:
+            try:
+                self._stub.Exchange(_wrap(None, STATUS_CLOSING), timeout=_CLOSE_TIMEOUT_S)
+            except grpc.RpcError:
+                pass
+        self._close_channel()
+
+    def _close_channel(self) -> None:
+        if self._channel is not None:
+            self._channel.close()
+            self._channel = None
+            self._stub = None
+
+
+def _wrap(output, status: int = STATUS_OK) -> unity_message_pb2.UnityMessageProto:
+    message = unity_message_pb2.UnityMessageProto(header=header_pb2.HeaderProto(status=status))
+    if output is not None:
+        message.unity_output.CopyFrom(output)
+    return message
+
+
+# Side channels -------------------------------------------------------------------------------
+class SideChannelState:
+    """What the trainer told the simulator through side channels (applied like Unity does)."""
+
+    def __init__(self, env_params: EnvironmentParameters) -> None:
+        self.env_params = env_params
+        self.engine_config: dict[str, object] = {}
+        self.float_properties: dict[str, float] = {}
+        self._warned: set[uuid.UUID] = set()
+
+    def apply(self, data: bytes) -> None:
+        for channel_id, payload in sc.unpack_messages(data):
+            if channel_id == sc.ENVIRONMENT_PARAMETERS_CHANNEL_ID:
+                key, parameter = sc.decode_env_parameter(payload)
+                self.env_params.set(key, parameter.sampler())
+                logger.debug("Environment parameter %s = %s", key, parameter)
+            elif channel_id == sc.ENGINE_CONFIG_CHANNEL_ID:
+                name, value = sc.decode_engine_config(payload)
+                self.engine_config[name] = value
+            elif channel_id == sc.FLOAT_PROPERTIES_CHANNEL_ID:
+                key, value = sc.decode_float_property(payload)
+                self.float_properties[key] = value
+            elif channel_id == sc.TRAINING_ANALYTICS_CHANNEL_ID:
+                continue
+            elif channel_id not in self._warned:
+                self._warned.add(channel_id)
+                logger.warning("Unknown side channel %s; its messages are ignored.", channel_id)
+
+
+def encode_stats(stats: list[Stat]) -> bytes:
+    """The stats channel messages for ``stats``, framed for ``rl_output.side_channel``."""
+    return sc.pack_messages((sc.STATS_CHANNEL_ID, sc.encode_stat(key, value, aggregation))
+                            for key, value, aggregation in stats)
