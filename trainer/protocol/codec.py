@@ -1,0 +1,355 @@
+"""Pure translation between the wire protos and numpy batches (spec §1.6, §3).
+
+Every Unity message is decoded exactly once, here, into the plain types of
+``trainer.protocol.types``; every answer is built here from ``ActionTuple`` batches. Nothing in
+this module does I/O or keeps state.
+"""
+from __future__ import annotations
+
+import itertools
+import re
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from protos.communicator_objects import capabilities_pb2, command_pb2, observation_pb2
+from protos.communicator_objects import unity_rl_input_pb2
+from trainer.errors import ProtocolError, UnityVersionError
+from trainer.protocol.png import decode_png_observation
+from trainer.protocol.types import (
+    ActionSpec,
+    ActionTuple,
+    BehaviorSpec,
+    DecisionSteps,
+    DimensionProperty,
+    ObservationSpec,
+    ObservationType,
+    StepResult,
+    TerminalSteps,
+)
+
+COMMUNICATION_VERSION = "1.5.0"
+PACKAGE_VERSION = "1.1.0"
+STEP = command_pb2.STEP
+RESET = command_pb2.RESET
+
+_P = DimensionProperty
+SUPPORTED_DIMENSION_PROPERTIES = frozenset(
+    {
+        (_P.NONE,),
+        (_P.UNSPECIFIED,),
+        (_P.NONE, _P.TRANSLATIONAL_EQUIVARIANCE, _P.TRANSLATIONAL_EQUIVARIANCE),
+        (_P.UNSPECIFIED,) * 3,
+        (_P.VARIABLE_SIZE, _P.NONE),
+    }
+)
+_VERSION_RE = re.compile(r"(\d+)\.(\d+)(?:\.(\d+))?(?:[ab]\d+)?")  # StrictVersion's grammar
+
+
+# --------------------------------------------------------------------------- handshake helpers
+def all_true_capabilities() -> capabilities_pb2.UnityRLCapabilitiesProto:
+    """The capabilities the trainer reports: every feature of communication API 1.5.0."""
+    return capabilities_pb2.UnityRLCapabilitiesProto(
+        baseRLCapabilities=True,
+        concatenatedPngObservations=True,
+        compressedChannelMapping=True,
+        hybridActions=True,
+        trainingAnalytics=True,
+        variableLengthObservation=True,
+        multiAgentGroups=True,
+    )
+
+
+def check_communication_version(unity_version: str) -> None:
+    """Raise UnityVersionError unless Unity's communication API can talk to ours (spec §1.6).
+
+    Unity major 0: major and minor must equal ours. Otherwise the majors must be equal.
+    """
+    advice = (
+        f"This trainer speaks communication API {COMMUNICATION_VERSION} (ML-Agents Python "
+        f"{PACKAGE_VERSION}); rebuild the environment with a Unity ML-Agents package whose "
+        "communication API is 1.x (com.unity.ml-agents 3.0.x, ML-Agents Release 22)."
+    )
+    match = _VERSION_RE.fullmatch(unity_version)
+    if match is None:
+        raise UnityVersionError(
+            f"The Unity environment reported a malformed communication version {unity_version!r}. "
+            + advice
+        )
+    unity_major, unity_minor = int(match.group(1)), int(match.group(2))
+    ours_major, ours_minor = (int(p) for p in COMMUNICATION_VERSION.split(".")[:2])
+    compatible = unity_major == ours_major and (unity_major != 0 or unity_minor == ours_minor)
+    if not compatible:
+        raise UnityVersionError(
+            f"The Unity environment speaks communication API {unity_version}, which is not "
+            f"compatible with {COMMUNICATION_VERSION}. " + advice
+        )
+
+
+# --------------------------------------------------------------------------- behavior specs
+def behavior_spec_from_proto(brain_params, agent_info) -> BehaviorSpec:
+    """BrainParametersProto + the behavior's first AgentInfoProto → BehaviorSpec (spec §3.2)."""
+    observation_specs = []
+    for index, obs in enumerate(agent_info.observations):
+        shape = tuple(obs.shape)
+        props = tuple(_P(p) for p in obs.dimension_properties) or (_P.UNSPECIFIED,) * len(shape)
+        if len(props) != len(shape) or props not in SUPPORTED_DIMENSION_PROPERTIES:
+            raise ProtocolError(
+                f"Unsupported sensor {obs.name!r} (observation {index}) of behavior "
+                f"{brain_params.brain_name!r}: shape {shape} with dimension properties "
+                f"{[p.name for p in props]}. Supported are vectors (rank 1), CHW images (rank 3) and "
+                "variable-length entity lists (VARIABLE_SIZE, NONE); change the sensor in the scene."
+            )
+        observation_specs.append(
+            ObservationSpec(shape, props, ObservationType(obs.observation_type), obs.name)
+        )
+    return BehaviorSpec(tuple(observation_specs), _action_spec_from_proto(brain_params))
+
+
+def _action_spec_from_proto(brain_params) -> ActionSpec:
+    spec = brain_params.action_spec
+    if spec.num_continuous_actions == 0 and spec.num_discrete_actions == 0:
+        # communication API < 1.3 only fills the deprecated fields
+        sizes = tuple(brain_params.vector_action_size_deprecated)
+        if brain_params.vector_action_space_type_deprecated == 1:  # continuous
+            return ActionSpec(sizes[0] if sizes else 0, ())
+        return ActionSpec(0, sizes)
+    return ActionSpec(spec.num_continuous_actions, tuple(spec.discrete_branch_sizes))
+
+
+# --------------------------------------------------------------------------- Unity → trainer
+def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec]) -> StepResult:
+    """Decode one UnityOutputProto into DecisionSteps/TerminalSteps per behavior.
+
+    ``known_specs`` is not modified: specs registered by this message's ``brain_parameters`` are
+    returned in ``StepResult.specs`` (the caller merges them). Every behavior with a spec gets an
+    entry in ``StepResult.steps`` (empty steps when the message does not mention it).
+    """
+    agent_infos = output.rl_output.agentInfos
+    new_specs: dict[str, BehaviorSpec] = {}
+    for brain_params in output.rl_initialization_output.brain_parameters:
+        name = brain_params.brain_name
+        if name in agent_infos and len(agent_infos[name].value) > 0:
+            new_specs[name] = behavior_spec_from_proto(brain_params, agent_infos[name].value[0])
+    specs = {**known_specs, **new_specs}
+    for name in agent_infos:
+        if name not in specs and len(agent_infos[name].value) > 0:
+            raise ProtocolError(
+                f"The simulator sent agents of behavior {name!r} without ever sending its "
+                "brain_parameters; it does not follow the ML-Agents protocol."
+            )
+    steps = {}
+    for name, spec in specs.items():
+        if name in agent_infos:
+            steps[name] = steps_from_agent_infos(name, agent_infos[name].value, spec)
+        else:
+            steps[name] = (DecisionSteps.empty(spec), TerminalSteps.empty(spec))
+    return StepResult(specs=new_specs, steps=steps, side_channel=output.rl_output.side_channel)
+
+
+def steps_from_agent_infos(
+    behavior_name: str, agent_infos: Sequence, spec: BehaviorSpec
+) -> tuple[DecisionSteps, TerminalSteps]:
+    """Split n AgentInfoProtos into DecisionSteps (done=false) and TerminalSteps (done=true).
+
+    Relative order is kept. Shapes as in ``trainer.protocol.types``.
+    """
+    n = len(agent_infos)
+    # one pass over the protos; float64 holds float32 rewards and int32 ids exactly
+    scalars = np.array(
+        [
+            (a.reward, a.group_reward, a.id, a.group_id, a.done, a.max_step_reached)
+            for a in agent_infos
+        ],
+        dtype=np.float64,
+    ).reshape(n, 6)
+    floats = scalars[:, :2].astype(np.float32)
+    agent_id, group_id = scalars[:, 2].astype(np.int64), scalars[:, 3].astype(np.int32)
+    done, max_step = scalars[:, 4].astype(bool), scalars[:, 5].astype(bool)
+    _require_finite(floats[:, 0], behavior_name, "reward", agent_id)
+    _require_finite(floats[:, 1], behavior_name, "group_reward", agent_id)
+    all_obs = [a.observations for a in agent_infos]
+    obs = [
+        _stack_observation(behavior_name, index, obs_spec, all_obs, agent_id)
+        for index, obs_spec in enumerate(spec.observation_specs)
+    ]
+    deciding = ~done
+    decision = DecisionSteps(
+        obs=[o[deciding] for o in obs],
+        reward=floats[deciding, 0],
+        agent_id=agent_id[deciding],
+        action_mask=_action_masks(agent_infos, deciding, spec.action_spec),
+        group_id=group_id[deciding],
+        group_reward=floats[deciding, 1],
+    )
+    terminal = TerminalSteps(
+        obs=[o[done] for o in obs],
+        reward=floats[done, 0],
+        interrupted=max_step[done],
+        agent_id=agent_id[done],
+        group_id=group_id[done],
+        group_reward=floats[done, 1],
+    )
+    return decision, terminal
+
+
+def _require_finite(values: np.ndarray, behavior: str, field: str, agent_id: np.ndarray) -> None:
+    """ProtocolError naming the first agent whose ``values`` row holds NaN or Inf."""
+    finite = np.isfinite(values.reshape(len(values), -1)).all(axis=1)
+    if not finite.all():
+        bad = int(np.argmin(finite))
+        raise ProtocolError(
+            f"Behavior {behavior!r} sent a NaN or infinite {field} for agent id {int(agent_id[bad])}; "
+            "fix the reward/observation code of that agent in the Unity project."
+        )
+
+
+def _stack_observation(
+    behavior: str, index: int, obs_spec: ObservationSpec, all_obs: list, agent_id: np.ndarray
+) -> np.ndarray:
+    """Observation ``index`` of every agent → float32 [n, *obs_spec.shape]."""
+    try:
+        sensor_obs = [agent_obs[index] for agent_obs in all_obs]
+    except IndexError:
+        raise ProtocolError(
+            f"An agent of behavior {behavior!r} sent fewer observations than its first agent "
+            f"(observation {index} is missing); all agents of a behavior need the same sensors."
+        ) from None
+    if len(obs_spec.shape) == 3:
+        return _stack_visual(behavior, index, obs_spec.shape, sensor_obs, agent_id)
+    stacked = _stack_float_data(behavior, index, obs_spec.shape, sensor_obs, agent_id)
+    _require_finite(stacked, behavior, f"observation {index} ({obs_spec.name})", agent_id)
+    return stacked
+
+
+def _stack_float_data(
+    behavior: str, index: int, shape: tuple[int, ...], sensor_obs: list, agent_id: np.ndarray
+) -> np.ndarray:
+    """Uncompressed observations → float32 [n, *shape] without touching each float in Python.
+
+    ``FloatData`` serializes to one tag byte, a varint byte length and the packed little-endian
+    float32 payload, so n serialized messages of equal length form an [n, header + 4*size]
+    byte matrix whose payload columns are the observations.
+    """
+    n, size = len(sensor_obs), int(np.prod(shape, dtype=np.int64))
+    if size == 0:
+        return np.zeros((n, *shape), dtype=np.float32)
+    header = b"\x0a" + _varint(4 * size)
+    row_bytes = len(header) + 4 * size
+    parts = [o.float_data.SerializeToString() for o in sensor_obs]
+    for row, part in enumerate(parts):
+        if len(part) != row_bytes:
+            raise ProtocolError(
+                f"Observation {index} of agent id {int(agent_id[row])} (behavior {behavior!r}) has "
+                f"{max(len(part) - len(header), 0) // 4} floats but its sensor shape {shape} needs "
+                f"{size}; all agents of a behavior need the same sensor shapes."
+            )
+    matrix = np.frombuffer(b"".join(parts), dtype=np.uint8).reshape(n, row_bytes)
+    payload = np.ascontiguousarray(matrix[:, len(header):])
+    return payload.view("<f4").astype(np.float32, copy=False).reshape(n, *shape)
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while True:
+        byte = value & 0x7F
+        value >>= 7
+        if value:
+            out.append(byte | 0x80)
+        else:
+            out.append(byte)
+            return bytes(out)
+
+
+def _stack_visual(
+    behavior: str, index: int, shape: tuple[int, ...], sensor_obs: list, agent_id: np.ndarray
+) -> np.ndarray:
+    """Rank-3 observations (PNG or float) → float32 [n, C, H, W]."""
+    out = np.empty((len(sensor_obs), *shape), dtype=np.float32)
+    for row, obs in enumerate(sensor_obs):
+        if tuple(obs.shape) != shape:
+            raise ProtocolError(
+                f"Observation {index} of agent id {int(agent_id[row])} (behavior {behavior!r}) has "
+                f"shape {tuple(obs.shape)} but the sensor declared {shape}."
+            )
+        if obs.compression_type == observation_pb2.PNG:
+            out[row] = decode_png_observation(
+                obs.compressed_data, shape, list(obs.compressed_channel_mapping)
+            )
+        else:
+            out[row] = _stack_float_data(behavior, index, shape, [obs], agent_id[row : row + 1])[0]
+    return out
+
+
+def _action_masks(
+    agent_infos: Sequence, deciding: np.ndarray, action_spec: ActionSpec
+) -> list[np.ndarray] | None:
+    """Per branch bool [n_deciding, branch_size], True = masked; None without discrete branches.
+
+    A mask whose length differs from the sum of the branch sizes is ignored (nothing masked).
+    """
+    branches = action_spec.discrete_branches
+    if not branches:
+        return None
+    total = int(sum(branches))
+    masks = [a.action_mask for a, d in zip(agent_infos, deciding) if d]
+    matrix = np.zeros((len(masks), total), dtype=bool)
+    rows = [row for row, mask in enumerate(masks) if len(mask) == total]
+    if rows:
+        flat = itertools.chain.from_iterable(masks[row] for row in rows)
+        matrix[rows] = np.fromiter(flat, dtype=bool, count=len(rows) * total).reshape(-1, total)
+    return np.split(matrix, np.cumsum(branches)[:-1], axis=1)
+
+
+# --------------------------------------------------------------------------- trainer → Unity
+def encode_rl_input(
+    actions: Mapping[str, ActionTuple], side_channel: bytes, command: int = STEP
+) -> unity_rl_input_pb2.UnityRLInputProto:
+    """Build a UnityRLInputProto (spec §3.4). RESET carries no actions."""
+    rl_input = unity_rl_input_pb2.UnityRLInputProto()
+    fill_rl_input(rl_input, actions, side_channel, command)
+    return rl_input
+
+
+def fill_rl_input(
+    rl_input, actions: Mapping[str, ActionTuple], side_channel: bytes, command: int = STEP
+) -> None:
+    """Fill an empty UnityRLInputProto in place (lets the server avoid a copy).
+
+    Per behavior: one AgentActionProto per row of the ActionTuple (continuous float32 [n, c],
+    discrete int32 [n, b]); ``vector_actions_deprecated`` = continuous then discrete as floats.
+    Behaviors with zero rows are left out.
+    """
+    rl_input.command = command
+    rl_input.side_channel = bytes(side_channel)
+    if command == RESET:
+        return
+    for behavior_name, action in actions.items():
+        continuous, discrete = _as_action_matrices(action)
+        if len(continuous) == 0:
+            continue
+        deprecated = np.concatenate([continuous, discrete.astype(np.float32)], axis=1)
+        value = rl_input.agent_actions[behavior_name].value
+        for cont_row, disc_row, dep_row in zip(
+            continuous.tolist(), discrete.tolist(), deprecated.tolist()
+        ):
+            agent_action = value.add()
+            agent_action.vector_actions_deprecated.extend(dep_row)
+            agent_action.continuous_actions.extend(cont_row)
+            agent_action.discrete_actions.extend(disc_row)
+
+
+def _as_action_matrices(action: ActionTuple) -> tuple[np.ndarray, np.ndarray]:
+    """ActionTuple → (float32 [n, c], int32 [n, b]); a None or empty part becomes [n, 0]."""
+    parts = (action.continuous, action.discrete)
+    rows = {len(p) for p in parts if p is not None and np.size(p) > 0}
+    if len(rows) > 1:
+        raise ValueError(f"continuous and discrete actions have different agent counts {rows}")
+    n = rows.pop() if rows else max((len(p) for p in parts if p is not None and np.ndim(p)), default=0)
+    return _as_matrix(parts[0], n, np.float32), _as_matrix(parts[1], n, np.int32)
+
+
+def _as_matrix(part, n: int, dtype) -> np.ndarray:
+    if part is None or np.size(part) == 0:
+        return np.zeros((n, 0), dtype=dtype)
+    return np.asarray(part, dtype=dtype).reshape(n, -1)

@@ -1,0 +1,355 @@
+"""The gRPC server end of ONE simulator connection (spec §1).
+
+The simulator (Unity or unity-stub-env) is the gRPC client: every message it sends is the request
+of an ``Exchange`` call, and the trainer's next message is that call's response. The servicer is
+a thin rendezvous: it parks each incoming call in a slot and blocks until the trainer answers it
+(or the endpoint closes, or the client goes away). All decoding happens on the trainer's thread.
+
+    endpoint = UnityEndpoint(port=5005, is_alive=process_is_running)
+    endpoint.start()
+    init = endpoint.handshake(seed=0, num_areas=1)   # M1 answered, M2 left pending
+    result = endpoint.reset(side_channel)            # answers M2 with RESET
+    result = endpoint.step(actions, side_channel)    # answers with STEP, waits for the next
+    endpoint.close()                                 # answers whatever is pending with 400
+"""
+from __future__ import annotations
+
+import collections
+import logging
+import socket
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, Mapping
+
+import grpc
+
+from protos.communicator_objects import unity_message_pb2
+from protos.communicator_objects.unity_to_external_pb2_grpc import (
+    UnityToExternalProtoServicer,
+    add_UnityToExternalProtoServicer_to_server,
+)
+from trainer.errors import (
+    PortInUseError,
+    ProtocolError,
+    SimulatorExitedError,
+    UnityCommunicatorStoppedError,
+    UnityTimeOutError,
+)
+from trainer.protocol import codec
+from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
+
+logger = logging.getLogger(__name__)
+
+MAX_MESSAGE_BYTES = 256 * 1024 * 1024  # camera observations easily pass gRPC's 4 MiB default
+STATUS_OK = 200
+STATUS_CLOSING = 400
+
+
+def _status_message(status: int) -> unity_message_pb2.UnityMessageProto:
+    message = unity_message_pb2.UnityMessageProto()
+    message.header.status = status
+    return message
+
+
+class _PendingCall:
+    """One Exchange call the simulator is blocked in, and the answer it is waiting for."""
+
+    __slots__ = ("request", "response", "abandoned", "_answered")
+
+    def __init__(self, request: unity_message_pb2.UnityMessageProto) -> None:
+        self.request = request
+        self.response: unity_message_pb2.UnityMessageProto | None = None
+        self.abandoned = False
+        self._answered = threading.Event()
+
+    def answer(self, response: unity_message_pb2.UnityMessageProto) -> None:
+        if self.response is None:
+            self.response = response
+        self._answered.set()
+
+    def abandon(self) -> None:
+        self.abandoned = True
+        self._answered.set()
+
+    def wait(self, timeout: float) -> bool:
+        return self._answered.wait(timeout)
+
+
+class _Rendezvous(UnityToExternalProtoServicer):
+    """Servicer + slot: hands each incoming call to the trainer thread that is waiting for it."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._incoming: collections.deque[_PendingCall] = collections.deque()
+        self.closed = False
+        self.client_gone = False
+
+    # ---- gRPC side
+    def Exchange(self, request, context):  # noqa: N802 (gRPC method name)
+        call = _PendingCall(request)
+        with self._cond:
+            if self.closed:
+                return _status_message(STATUS_CLOSING)
+            self._incoming.append(call)
+            self._cond.notify_all()
+        context.add_callback(lambda: self._on_rpc_done(call))
+        while not call.wait(1.0):
+            if not context.is_active():
+                self._on_rpc_done(call)
+        return call.response if call.response is not None else _status_message(STATUS_CLOSING)
+
+    def _on_rpc_done(self, call: _PendingCall) -> None:
+        """The RPC ended; if it was never answered the client went away (crash, cancel)."""
+        if call.response is None:
+            call.abandon()
+            with self._cond:
+                self.client_gone = True
+                self._cond.notify_all()
+
+    # ---- trainer side
+    def take(self, timeout: float) -> _PendingCall | None:
+        """The next incoming call, or None after ``timeout`` s or once the client is gone."""
+        with self._cond:
+            self._cond.wait_for(
+                lambda: self._incoming or self.client_gone or self.closed, timeout=timeout
+            )
+            return self._incoming.popleft() if self._incoming else None
+
+    def close(self) -> list[_PendingCall]:
+        """Refuse new calls; return the queued ones so the caller can answer them."""
+        with self._cond:
+            self.closed = True
+            queued = list(self._incoming)
+            self._incoming.clear()
+            self._cond.notify_all()
+        return queued
+
+
+class UnityEndpoint:
+    """The trainer side of one simulator connection on ``bind:port``."""
+
+    def __init__(
+        self,
+        port: int,
+        bind: str = "127.0.0.1",
+        timeout_wait: float = 60.0,
+        is_alive: Callable[[], bool] | None = None,
+        describe: str = "",
+    ) -> None:
+        self.port = port
+        self.bind = bind
+        self.timeout_wait = float(timeout_wait)
+        self.is_alive = is_alive
+        self.describe = describe
+        self.behavior_specs: dict[str, BehaviorSpec] = {}
+        self.init_output = None  # UnityRLInitializationOutputProto from M1
+        self._rendezvous = _Rendezvous()
+        self._server: grpc.Server | None = None
+        self._pending: _PendingCall | None = None
+        self._deciding: dict[str, int] = {}  # agents per behavior that wait for an action
+        self._messages_received = 0
+        self._closed = False
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        """Check the port is free, then serve UnityToExternalProto on ``bind:port``."""
+        self._check_port_free()
+        server = grpc.server(
+            ThreadPoolExecutor(max_workers=4, thread_name_prefix=f"unity-endpoint-{self.port}"),
+            options=[
+                ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
+                ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
+                ("grpc.so_reuseport", 0),  # a second server on this port must fail
+            ],
+        )
+        add_UnityToExternalProtoServicer_to_server(self._rendezvous, server)
+        host = f"[{self.bind}]" if ":" in self.bind else self.bind
+        try:
+            bound_port = server.add_insecure_port(f"{host}:{self.port}")
+        except RuntimeError:
+            bound_port = 0
+        if bound_port == 0:
+            server.stop(None)
+            raise self._port_in_use_error()
+        self.port = bound_port
+        server.start()
+        self._server = server
+
+    def _check_port_free(self) -> None:
+        family = socket.AF_INET6 if ":" in self.bind else socket.AF_INET
+        probe = socket.socket(family, socket.SOCK_STREAM)
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((self.bind, self.port))
+        except OSError:
+            raise self._port_in_use_error() from None
+        finally:
+            probe.close()
+
+    def _port_in_use_error(self) -> PortInUseError:
+        return PortInUseError(
+            f"Port {self.port} on {self.bind} is already in use{self._for()}, maybe by another "
+            "training run or a simulator that did not exit. Stop it, or pick other ports with "
+            "--base-port."
+        )
+
+    def close(self) -> None:
+        """Answer any pending simulator call with status 400, then stop serving. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        to_answer = self._rendezvous.close()
+        if self._pending is not None:
+            to_answer.insert(0, self._pending)
+            self._pending = None
+        for call in to_answer:
+            call.answer(_status_message(STATUS_CLOSING))
+        if self._server is not None:
+            # the grace period lets the 400 answers reach the simulator before sockets close
+            self._server.stop(grace=2.0).wait(5.0)
+            self._server = None
+
+    def __enter__(self) -> "UnityEndpoint":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ handshake
+    def handshake(self, seed: int, num_areas: int):
+        """Answer M1 with our initialization input, then wait for M2 and leave it pending.
+
+        Returns M1's UnityRLInitializationOutputProto. Raises UnityVersionError for an
+        incompatible communication API (the M1 call stays pending; ``close()`` answers it).
+        """
+        first = self._wait_for_call().request
+        if not first.unity_output.HasField("rl_initialization_output"):
+            raise ProtocolError(
+                f"The first message from the simulator{self._for()} carried no initialization "
+                "output; is it an ML-Agents environment speaking communication API 1.x?"
+            )
+        init = first.unity_output.rl_initialization_output
+        codec.check_communication_version(init.communication_version)
+        if not init.capabilities.baseRLCapabilities:
+            logger.warning(
+                "The Unity environment%s (package %s) does not report the base RL capabilities; "
+                "upgrade its ML-Agents package to one compatible with Python package %s.",
+                self._for(), init.package_version, codec.PACKAGE_VERSION,
+            )
+        logger.info(
+            "Connected to Unity environment with package version %s and communication version %s",
+            init.package_version, init.communication_version,
+        )
+        response = _status_message(STATUS_OK)
+        init_input = response.unity_input.rl_initialization_input
+        init_input.seed = seed
+        init_input.communication_version = codec.COMMUNICATION_VERSION
+        init_input.package_version = codec.PACKAGE_VERSION
+        init_input.capabilities.CopyFrom(codec.all_true_capabilities())
+        init_input.num_areas = num_areas
+        self._answer(response)
+        self._wait_for_call()  # M2: no output; answered by the first reset
+        self.init_output = init
+        return init
+
+    # ------------------------------------------------------------------ exchanges
+    def send_reset(self, side_channel: bytes = b"") -> None:
+        """Answer the pending simulator call with RESET (no actions). Does not block."""
+        response = _status_message(STATUS_OK)
+        codec.fill_rl_input(response.unity_input.rl_input, {}, side_channel, codec.RESET)
+        self._answer(response)
+
+    def send_step(self, actions: Mapping[str, ActionTuple], side_channel: bytes = b"") -> None:
+        """Answer the pending call with STEP. Does not block.
+
+        ``actions[behavior]`` needs one row per agent of the last DecisionSteps, in order; a
+        behavior with deciding agents but no entry gets all-zero actions (as the reference).
+        """
+        full_actions = dict(actions)
+        for name, n_deciding in self._deciding.items():
+            if name not in full_actions and n_deciding > 0:
+                full_actions[name] = self.behavior_specs[name].action_spec.empty_action(n_deciding)
+        for name, action in full_actions.items():
+            rows = {len(p) for p in action if p is not None and getattr(p, "size", 1) > 0}
+            if rows and rows != {self._deciding.get(name, 0)}:
+                raise ValueError(
+                    f"{name}: {rows.pop()} action rows for {self._deciding.get(name, 0)} deciding agents"
+                )
+        response = _status_message(STATUS_OK)
+        codec.fill_rl_input(response.unity_input.rl_input, full_actions, side_channel, codec.STEP)
+        self._answer(response)
+
+    def receive(self) -> StepResult:
+        """Wait for the simulator's next message and decode it (leaves that call pending)."""
+        request = self._wait_for_call().request
+        result = codec.decode_rl_output(request.unity_output, self.behavior_specs)
+        self.behavior_specs.update(result.specs)
+        self._deciding = {name: len(steps[0]) for name, steps in result.steps.items()}
+        return result
+
+    def reset(self, side_channel: bytes = b"") -> StepResult:
+        self.send_reset(side_channel)
+        return self.receive()
+
+    def step(self, actions: Mapping[str, ActionTuple], side_channel: bytes = b"") -> StepResult:
+        self.send_step(actions, side_channel)
+        return self.receive()
+
+    # ------------------------------------------------------------------ internals
+    def _answer(self, response: unity_message_pb2.UnityMessageProto) -> None:
+        if self._pending is None:
+            raise RuntimeError("no simulator call is pending: receive() before sending again")
+        call, self._pending = self._pending, None
+        call.answer(response)
+
+    def _wait_for_call(self) -> _PendingCall:
+        """Block until the simulator's next call arrives; it becomes the pending call."""
+        if self._server is None or self._closed:
+            raise RuntimeError("UnityEndpoint is not started or already closed")
+        if self._pending is not None:
+            raise RuntimeError("the previous simulator call has not been answered yet")
+        started = time.monotonic()
+        poll_interval = max(self.timeout_wait / 10.0, 0.001)
+        while True:
+            remaining = started + self.timeout_wait - time.monotonic()
+            call = self._rendezvous.take(min(poll_interval, max(remaining, 0.0)))
+            if call is not None:
+                break
+            if self._rendezvous.closed:
+                raise UnityCommunicatorStoppedError(f"The endpoint on port {self.port} was closed.")
+            self._raise_if_simulator_died()
+            if self._rendezvous.client_gone:
+                raise UnityCommunicatorStoppedError(
+                    f"The simulator{self._for()} on port {self.port} dropped its connection."
+                )
+            if time.monotonic() - started >= self.timeout_wait:
+                raise self._timeout_error(time.monotonic() - started)
+        self._pending = call
+        self._messages_received += 1
+        if call.request.header.status != STATUS_OK:
+            self._answer(_status_message(STATUS_CLOSING))
+            raise UnityCommunicatorStoppedError(
+                f"The simulator{self._for()} on port {self.port} closed the connection "
+                f"(status {call.request.header.status})."
+            )
+        return call
+
+    def _raise_if_simulator_died(self) -> None:
+        if self.is_alive is not None and not self.is_alive():
+            raise SimulatorExitedError(
+                f"The simulator{self._for()} on port {self.port} exited while the trainer was "
+                "waiting for it. Check its log (Player-<worker>.log in the run_logs folder)."
+            )
+
+    def _timeout_error(self, waited: float) -> UnityTimeOutError:
+        what = "connected" if self._messages_received == 0 else "answered"
+        return UnityTimeOutError(
+            f"No simulator{self._for()} {what} on {self.bind}:{self.port} within {waited:.1f} s. "
+            "Likely causes: the build was not made with ML-Agents or its Academy is not in the "
+            "scene; the Unity Editor is not in Play mode; a firewall blocks the port; or "
+            "--timeout-wait is too low for this environment to load."
+        )
+
+    def _for(self) -> str:
+        return f" ({self.describe})" if self.describe else ""
