@@ -49,7 +49,7 @@ HISTOGRAM_KEYS = frozenset({CUMULATIVE_REWARD})
 """Keys always kept as HISTOGRAM (an AVERAGE add is upgraded; the scalar is the same mean)."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class StatsSummary:
     """What was recorded for one key since the last write.
 
@@ -79,7 +79,7 @@ class _KeyAccumulator:
     Batched merges keep AVERAGE/SUM stats O(1) in memory; HISTOGRAM keeps the raw chunks too.
     """
 
-    __slots__ = ("aggregation", "count", "mean", "m2", "total", "last", "chunks")
+    __slots__ = ("aggregation", "count", "mean", "m2", "total", "last", "chunks", "scalars")
 
     def __init__(self, aggregation: StatsAggregationMethod) -> None:
         self.aggregation = aggregation
@@ -89,27 +89,49 @@ class _KeyAccumulator:
         self.total = 0.0
         self.last = float("nan")
         self.chunks: list[np.ndarray] = []
+        self.scalars: list[float] = []  # HISTOGRAM values from push() not yet in chunks
 
     def reset(self) -> None:
         self.count, self.mean, self.m2, self.total = 0, 0.0, 0.0, 0.0
         self.chunks = []
+        self.scalars = []
+
+    def _flush_scalars(self) -> None:
+        if self.scalars:
+            self.chunks.append(np.asarray(self.scalars, dtype=np.float64))
+            self.scalars = []
 
     def merge(self, batch: np.ndarray) -> None:
         """Fold a float64 batch of shape ``[n]`` (n >= 1) into the running moments."""
         n = batch.shape[0]
-        batch_mean = float(batch.mean())
-        batch_m2 = float(np.square(batch - batch_mean).sum())
+        batch_sum = float(batch.sum())
+        batch_mean = batch_sum / n
+        centered = batch - batch_mean
+        batch_m2 = float(np.dot(centered, centered))
         new_count = self.count + n
         delta = batch_mean - self.mean
         self.mean += delta * n / new_count
         self.m2 += batch_m2 + delta * delta * self.count * n / new_count
         self.count = new_count
-        self.total += float(batch.sum())
+        self.total += batch_sum
         self.last = float(batch[-1])
         if self.aggregation == StatsAggregationMethod.HISTOGRAM:
+            self._flush_scalars()  # keep insertion order
             self.chunks.append(batch)
 
+    def push(self, value: float) -> None:
+        """Fold one value in (Welford's update; no numpy on this path)."""
+        self.count += 1
+        delta = value - self.mean
+        self.mean += delta / self.count
+        self.m2 += delta * (value - self.mean)
+        self.total += value
+        self.last = value
+        if self.aggregation == StatsAggregationMethod.HISTOGRAM:
+            self.scalars.append(value)
+
     def summary(self) -> StatsSummary:
+        self._flush_scalars()
         if self.chunks:
             values = np.concatenate(self.chunks)
         else:
@@ -139,7 +161,22 @@ class StatsAggregator:
         aggregation: StatsAggregationMethod = StatsAggregationMethod.AVERAGE,
     ) -> None:
         """Record one value. MOST_RECENT replaces whatever the key held."""
-        self.add_many(key, np.asarray([value], dtype=np.float64), aggregation)
+        acc = self._accumulator(key, aggregation)
+        if acc.aggregation == StatsAggregationMethod.MOST_RECENT:
+            acc.reset()
+        acc.push(float(value))
+
+    def _accumulator(self, key: str, aggregation: StatsAggregationMethod) -> _KeyAccumulator:
+        """The key's accumulator, switched to ``aggregation`` (the last method given wins)."""
+        aggregation = StatsAggregationMethod(aggregation)
+        if aggregation == StatsAggregationMethod.AVERAGE and key in HISTOGRAM_KEYS:
+            aggregation = StatsAggregationMethod.HISTOGRAM
+        acc = self._keys.get(key)
+        if acc is None:
+            acc = self._keys[key] = _KeyAccumulator(aggregation)
+        elif acc.aggregation != aggregation:
+            acc.aggregation = aggregation
+        return acc
 
     def add_many(
         self,
@@ -154,16 +191,8 @@ class StatsAggregator:
         batch = np.asarray(values, dtype=np.float64).reshape(-1)
         if batch.shape[0] == 0:
             return
-        aggregation = StatsAggregationMethod(aggregation)
-        if aggregation == StatsAggregationMethod.AVERAGE and key in HISTOGRAM_KEYS:
-            aggregation = StatsAggregationMethod.HISTOGRAM
-        acc = self._keys.get(key)
-        if acc is None:
-            acc = _KeyAccumulator(aggregation)
-            self._keys[key] = acc
-        elif acc.aggregation != aggregation:
-            acc.aggregation = aggregation
-        if aggregation == StatsAggregationMethod.MOST_RECENT:
+        acc = self._accumulator(key, aggregation)
+        if acc.aggregation == StatsAggregationMethod.MOST_RECENT:
             acc.reset()
             batch = batch[-1:]
         acc.merge(batch)
