@@ -325,3 +325,15 @@ def test_progress_line_tty_rewrites_in_place_and_clears():
     progress.update("A", 6000)
     progress.close()
     assert stream.parts[-1] == "\n"
+
+
+def test_console_writer_clears_tty_progress_before_logging(caplog):
+    stream = FakeStream()
+    progress = ProgressLine(stream, clock=lambda: 0.0, is_tty=True)
+    progress.update("A", 3)
+    writer = ConsoleWriter(logging.getLogger("test.console2"), clock=lambda: 0.0, progress=progress)
+    with caplog.at_level(logging.INFO, logger="test.console2"):
+        writer.write_stats("A", {}, 3)
+    drawn = "A: step 3 · -- steps/s"
+    assert stream.parts == ["\r" + drawn, "\r" + " " * len(drawn) + "\r"]
+    assert caplog.messages == ["A. Step: 3. Time Elapsed: 0.000 s. No episode was completed since last summary. Not Training."]
