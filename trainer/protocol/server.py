@@ -311,9 +311,9 @@ class UnityEndpoint:
             raise RuntimeError("the previous simulator call has not been answered yet")
         started = time.monotonic()
         poll_interval = max(self.timeout_wait / 10.0, 0.001)
+        wait = 0.0  # first look without waiting, so a dead simulator is reported at once
         while True:
-            remaining = started + self.timeout_wait - time.monotonic()
-            call = self._rendezvous.take(min(poll_interval, max(remaining, 0.0)))
+            call = self._rendezvous.take(wait)
             if call is not None:
                 break
             if self._rendezvous.closed:
@@ -323,8 +323,10 @@ class UnityEndpoint:
                 raise UnityCommunicatorStoppedError(
                     f"The simulator{self._for()} on port {self.port} dropped its connection."
                 )
-            if time.monotonic() - started >= self.timeout_wait:
+            remaining = started + self.timeout_wait - time.monotonic()
+            if remaining <= 0:
                 raise self._timeout_error(time.monotonic() - started)
+            wait = min(poll_interval, remaining)
         self._pending = call
         self._messages_received += 1
         if call.request.header.status != STATUS_OK:
