@@ -142,3 +142,18 @@ def test_restore_lessons_and_clamping(caplog):
 ])
 def test_sampler_console_formats(sampler, text):
     assert str(sampler) == text
+
+
+def test_upgrade_script_lesson_form_is_read_with_a_warning(caplog):
+    raw = {"h": {"curriculum": [
+        {"Lesson0": {"completion_criteria": {"behavior": "A", "measure": "progress", "threshold": 0.1},
+                     "value": {"sampler_type": "uniform", "sampler_parameters": {"min_value": 0.0, "max_value": 4.0}}}},
+        {"Lesson1": {"value": 8.0}},
+    ]}}
+    with caplog.at_level("WARNING", logger="mlagents_like"):
+        params = structure_environment_parameters(raw, behavior_names=["A"])
+    lessons = params["h"].curriculum
+    assert [lesson.name for lesson in lessons] == ["Lesson0", "Lesson1"]
+    assert lessons[0].value == UniformSampler(0.0, 4.0, -1) and lessons[1].value == ConstantSampler(8.0)
+    assert lessons[0].completion_criteria.threshold == 0.1
+    assert "Lesson0" in caplog.text

@@ -135,7 +135,8 @@ def test_env_settings_cross_checks(tmp_path):
      "threshold: 1.5}}, {name: L1, value: 2}]}", "[0, 1]"),
     ("p: {curriculum: [{name: L0, value: 1, completion_criteria: {behavior: Ghost}}, {name: L1, value: 2}]}",
      "'Ghost'"),
-    ("p: {curriculum: [{Lesson0: {value: 1}}]}", "name: Lesson0"),
+    ("p: {curriculum: [{Lesson0: {value: 1, completion_criteria: {behavior: A}}}, {name: L1}]}",
+     "curriculum[1].value"),
 ])
 def test_environment_parameter_errors(tmp_path, params, fragment):
     message = error_for(tmp_path, f"behaviors:\n  A: {{trainer_type: ppo}}\nenvironment_parameters:\n  {params}\n")

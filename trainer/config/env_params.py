@@ -169,11 +169,14 @@ def structure_completion_criteria(raw: Any, path: str) -> CompletionCriteria:
 def structure_lesson(raw: Any, path: str) -> Lesson:
     raw = require_mapping(raw, path, "a lesson {name, value, completion_criteria}")
     if len(raw) == 1 and "name" not in raw and isinstance(next(iter(raw.values())), Mapping):
-        only = next(iter(raw))
-        raise ConfigError(
-            f"'{path}' is written as '{only}: {{...}}' (the upgrade script's form). "
-            f"Write it as a mapping with 'name: {only}' beside 'value' and 'completion_criteria'."
+        # The upgrade script (and old example configs) write '- Lesson0: {value, ...}'. The
+        # reference loader rejects it; we read it as '- {name: Lesson0, value, ...}'.
+        only, body = next(iter(raw.items()))
+        logger.warning(
+            "'%s' is written as '%s: {...}'; reading it as a lesson named '%s'. "
+            "Write 'name: %s' beside 'value' to silence this warning.", path, only, only, only,
         )
+        raw = {"name": str(only), **body}
     check_known_keys(raw, ("name", "value", "completion_criteria"), path)
     for key in ("name", "value"):
         if raw.get(key) is None:
