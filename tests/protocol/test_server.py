@@ -1,13 +1,15 @@
 """UnityEndpoint against a real gRPC client ("Unity") in a thread, on a free port."""
 from __future__ import annotations
 
+import logging
 import socket
+import threading
 
 import grpc
 import numpy as np
 import pytest
 
-from protos.communicator_objects import command_pb2
+from protos.communicator_objects import command_pb2, unity_to_external_pb2_grpc
 from tests.protocol.conftest import (
     ScriptedUnity,
     agent_info,
@@ -183,6 +185,24 @@ def test_port_in_use_is_reported(endpoint, port):
     second.close()
 
 
+def test_grpc_refuses_a_second_server_on_the_port_even_without_the_pre_check(endpoint, port, monkeypatch):
+    second = UnityEndpoint(port)
+    monkeypatch.setattr(second, "_check_port_free", lambda: None)
+    with pytest.raises(PortInUseError, match=str(port)):
+        second.start()
+
+
+def test_missing_base_capabilities_only_warn(endpoint, port, caplog):
+    unity = ScriptedUnity(port, [m1(base_caps=False), m2()])
+    unity.start()
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.server"):
+        endpoint.handshake(0, 1)
+    assert "base RL capabilities" in caplog.text
+    endpoint.close()
+    unity.finish()
+    assert unity.responses[1].header.status == 400
+
+
 def test_port_held_by_a_plain_socket_is_reported():
     with socket.socket() as holder:
         holder.bind(("127.0.0.1", 0))
@@ -220,8 +240,6 @@ def test_camera_sized_message_over_4_mib_goes_through(endpoint, port):
 
 def test_client_that_goes_away_mid_call_stops_the_endpoint(endpoint, port):
     channel = grpc.insecure_channel(f"127.0.0.1:{port}")
-    from protos.communicator_objects import unity_to_external_pb2_grpc
-
     stub = unity_to_external_pb2_grpc.UnityToExternalProtoStub(channel)
     future = stub.Exchange.future(m1(), wait_for_ready=True)
     # the trainer takes M1 and answers; then the client's M2 call is cancelled before an answer
@@ -232,8 +250,6 @@ def test_client_that_goes_away_mid_call_stops_the_endpoint(endpoint, port):
             endpoint.handshake(0, 1)
         except Exception as err:  # noqa: BLE001 - recorded for the assertion below
             endpoint_thread_result["error"] = err
-
-    import threading
 
     t = threading.Thread(target=handshake, daemon=True)
     t.start()

@@ -93,7 +93,8 @@ class _Rendezvous(UnityToExternalProtoServicer):
                 return _status_message(STATUS_CLOSING)
             self._incoming.append(call)
             self._cond.notify_all()
-        context.add_callback(lambda: self._on_rpc_done(call))
+        if not context.add_callback(lambda: self._on_rpc_done(call)):
+            self._on_rpc_done(call)  # the RPC had already ended
         while not call.wait(1.0):
             if not context.is_active():
                 self._on_rpc_done(call)
