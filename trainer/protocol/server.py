@@ -238,7 +238,7 @@ class UnityEndpoint:
                 "upgrade its ML-Agents package to one compatible with Python package %s.",
                 self._for(), init.package_version, codec.PACKAGE_VERSION,
             )
-        logger.info(
+        logger.debug(
             "Connected to Unity environment with package version %s and communication version %s",
             init.package_version, init.communication_version,
         )
