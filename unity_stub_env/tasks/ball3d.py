@@ -64,7 +64,7 @@ def build_mjcf(num_plates: int) -> str:
             actuators.append(f'<position joint="tilt_{axis}{i}" kp="2000" kv="250"/>')
     return (
         '<mujoco model="ball3d">'
-        f'<option timestep="{TIMESTEP}" integrator="implicitfast" gravity="0 0 -9.81"/>'
+        f'<option timestep="{TIMESTEP}" integrator="implicit" gravity="0 0 -9.81"/>'
         '<default><geom friction="1 0.005 0.0001"/></default>'
         f'<worldbody>{"".join(bodies)}</worldbody>'
         f'<actuator>{"".join(actuators)}</actuator></mujoco>'
@@ -136,11 +136,17 @@ class Ball3DTask(Task):
         params = self.env_params
         mass = params.get_many("mass", 1.0, len(agents))
         radius = BALL_RADIUS * params.get_many("scale", 1.0, len(agents))
-        model = self.model
-        model.body_mass[self.ball_body[agents]] = mass
-        model.body_inertia[self.ball_body[agents]] = (0.4 * mass * radius**2)[:, None]
+        inertia = 0.4 * mass * radius**2  # solid sphere
+        model, bodies, dofs = self.model, self.ball_body[agents], self.ball_qvel[agents]
+        model.body_mass[bodies] = mass
+        model.body_inertia[bodies] = inertia[:, None]
+        # MuJoCo caches these for "simple" bodies (constant mass matrix) and for contact softness
+        model.dof_M0[dofs] = np.column_stack([np.repeat(mass[:, None], 3, 1), np.repeat(inertia[:, None], 3, 1)])
+        model.body_invweight0[bodies] = np.column_stack([1.0 / mass, 1.0 / inertia])
+        model.dof_invweight0[dofs] = 1.0 / model.dof_M0[dofs]
         model.geom_size[self.ball_geom[agents], 0] = radius
-        model.geom_rbound[self.ball_geom[agents]] = radius
+        model.geom_rbound[self.ball_geom[agents]] = radius  # broadphase bounds follow the size
+        model.geom_aabb[self.ball_geom[agents], 3:] = radius[:, None]
         model.opt.gravity[2] = -params.get("gravity", 9.81)
 
     def observe(self) -> list[np.ndarray]:
