@@ -195,6 +195,8 @@ def steps_from_agent_infos(
 
 def _require_finite(values: np.ndarray, behavior: str, field: str, agent_id: np.ndarray) -> None:
     """ProtocolError naming the first agent whose ``values`` row holds NaN or Inf."""
+    if np.isfinite(values).all():
+        return
     finite = np.isfinite(values.reshape(len(values), -1)).all(axis=1)
     if not finite.all():
         bad = int(np.argmin(finite))
