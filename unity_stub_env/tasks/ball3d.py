@@ -40,6 +40,10 @@ TIMESTEP = 0.01
 SUBSTEPS = 2  # MuJoCo steps per control step (0.02 s, Unity's fixed timestep)
 MAX_TILT = 0.25  # rad
 TILT_RATE = np.deg2rad(2.0)  # rad of target change per control step at |action| = 1
+# PD plate servo: position actuator stiffness, joint damping (Euler integrates joint damping
+# implicitly, so this is stable at 0.01 s); about 0.9 of critical damping for the plate inertia.
+PLATE_STIFFNESS = 2000.0
+PLATE_DAMPING = 250.0
 FALL_DEPTH = -2.0
 FALL_DISTANCE = 3.0
 ON_PLATE_REWARD = 0.1
@@ -54,17 +58,17 @@ def build_mjcf(num_plates: int) -> str:
         x, y = (i % columns) * AREA_SPACING, (i // columns) * AREA_SPACING
         bodies.append(
             f'<body name="plate{i}" pos="{x} {y} {PLATE_HEIGHT}">'
-            f'<joint name="tilt_x{i}" type="hinge" axis="1 0 0" damping="1"/>'
-            f'<joint name="tilt_y{i}" type="hinge" axis="0 1 0" damping="1"/>'
+            f'<joint name="tilt_x{i}" type="hinge" axis="1 0 0" damping="{PLATE_DAMPING}"/>'
+            f'<joint name="tilt_y{i}" type="hinge" axis="0 1 0" damping="{PLATE_DAMPING}"/>'
             f'<geom type="box" size="{PLATE_HALF_SIZE} {PLATE_HALF_SIZE} 0.2" mass="5"/></body>'
             f'<body name="ball{i}" pos="{x} {y} {PLATE_HEIGHT + 4}"><freejoint name="ball{i}"/>'
             f'<geom name="ball{i}" type="sphere" size="{BALL_RADIUS}" mass="1"/></body>'
         )
         for axis in ("x", "y"):
-            actuators.append(f'<position joint="tilt_{axis}{i}" kp="2000" kv="250"/>')
+            actuators.append(f'<position joint="tilt_{axis}{i}" kp="{PLATE_STIFFNESS}"/>')
     return (
         '<mujoco model="ball3d">'
-        f'<option timestep="{TIMESTEP}" integrator="implicit" gravity="0 0 -9.81"/>'
+        f'<option timestep="{TIMESTEP}" integrator="Euler" gravity="0 0 -9.81"/>'
         '<default><geom friction="1 0.005 0.0001"/></default>'
         f'<worldbody>{"".join(bodies)}</worldbody>'
         f'<actuator>{"".join(actuators)}</actuator></mujoco>'
