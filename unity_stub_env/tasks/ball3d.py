@@ -115,6 +115,13 @@ class Ball3DTask(Task):
         self.ball_body = np.array([model.body(f"ball{i}").id for i in range(n)])
         self.ball_geom = np.array([model.geom(f"ball{i}").id for i in range(n)])
         self.plate_centre = np.array([model.body(f"plate{i}").pos for i in range(n)])  # [n, 3]
+        # build_mjcf lays every agent out contiguously: qpos [tilt x, tilt y, ball pos 3, quat 4]
+        # and qvel [tilt x, tilt y, ball lin 3, ang 3], so per-agent rows are plain reshaped views.
+        assert np.array_equal(self.tilt_qpos, 9 * np.arange(n)[:, None] + np.arange(2))
+        assert np.array_equal(self.ball_qvel, 8 * np.arange(n)[:, None] + 2 + np.arange(6))
+        self.qpos_rows = self.data.qpos.reshape(n, 9)  # views into MjData: no copies per step
+        self.qvel_rows = self.data.qvel.reshape(n, 8)
+        self.ctrl_rows = self.data.ctrl.reshape(n, 2)
 
     # ----------------------------------------------------------------------------------------
     def reset(self, mask: np.ndarray | None = None) -> None:
@@ -155,21 +162,20 @@ class Ball3DTask(Task):
 
     def observe(self) -> list[np.ndarray]:
         """[float32 [n, 8]]: tilt x, tilt y, ball position - plate centre (3), ball velocity (3)."""
-        qpos, qvel = self.data.qpos, self.data.qvel
         obs = np.empty((self.num_agents, 8), dtype=np.float32)
-        obs[:, 0:2] = qpos[self.tilt_qpos]
-        obs[:, 2:5] = qpos[self.ball_pos_qpos] - self.plate_centre
-        obs[:, 5:8] = qvel[self.ball_qvel[:, :3]]
+        obs[:, 0:2] = self.qpos_rows[:, 0:2]
+        obs[:, 2:5] = self.qpos_rows[:, 2:5] - self.plate_centre
+        obs[:, 5:8] = self.qvel_rows[:, 2:5]
         return [obs]
 
     def step(self, continuous: np.ndarray, discrete: np.ndarray) -> TaskStep:
         """continuous float [n, 2] in [-1, 1] -> one 0.02 s control step of every plate."""
-        action = np.clip(np.asarray(continuous, dtype=np.float64).reshape(self.num_agents, 2), -1, 1)
-        self.target_tilt = np.clip(self.target_tilt + action * TILT_RATE, -MAX_TILT, MAX_TILT)
-        self.data.ctrl[self.ctrl] = self.target_tilt
+        action = np.asarray(continuous, dtype=np.float64).reshape(self.num_agents, 2).clip(-1.0, 1.0)
+        self.target_tilt = (self.target_tilt + action * TILT_RATE).clip(-MAX_TILT, MAX_TILT)
+        self.ctrl_rows[:] = self.target_tilt
         mujoco.mj_step(self.model, self.data, nstep=SUBSTEPS)
         self.episode_step += 1
-        relative = self.data.qpos[self.ball_pos_qpos] - self.plate_centre
+        relative = self.qpos_rows[:, 2:5] - self.plate_centre
         fell = ((relative[:, 2] < FALL_DEPTH) | (np.abs(relative[:, 0]) > FALL_DISTANCE)
                 | (np.abs(relative[:, 1]) > FALL_DISTANCE))
         rewards = np.where(fell, FALL_REWARD, ON_PLATE_REWARD).astype(np.float32)
