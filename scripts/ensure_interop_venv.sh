@@ -2,12 +2,15 @@
 # Creates .venv-interop: the real ML-Agents 1.1.0 Python packages, used only as an interop peer
 # in their own process (they pin protobuf 3.20.3, so they never share a process with our code).
 # The wheels declare Python 3.10.1-3.10.12; they run on newer Pythons with --ignore-requires-python.
+# tensorboard is pinned to 2.18.0: later releases generate protos that need protobuf>=5
+# (google.protobuf.runtime_version), which breaks mlagents-learn's import of SummaryWriter.
+# absl-py is needed by torch.utils.tensorboard (everything here is installed with --no-deps).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$root"
 venv=.venv-interop
 stamp="$venv/.interop-stamp"
-want="mlagents-1.1.0-torch-2.13.0-v1"
+want="mlagents-1.1.0-torch-2.13.0-v2"
 if [ -x "$venv/bin/python" ] && [ "$(cat "$stamp" 2>/dev/null)" = "$want" ]; then exit 0; fi
 py="${PYTHON:-python3}"
 rm -rf "$venv"
@@ -18,7 +21,7 @@ trap 'rm -rf "$wheels"' EXIT
   -d "$wheels" mlagents==1.1.0 mlagents-envs==1.1.0
 "$venv/bin/python" -m pip install -q "torch==2.13.0"
 "$venv/bin/python" -m pip install -q --no-deps --ignore-requires-python "$wheels"/*.whl \
-  grpcio "protobuf==3.20.3" "numpy==1.23.5" pyyaml Pillow cloudpickle filelock h5py tensorboard \
-  six attrs "cattrs==1.5.0" onnx huggingface-hub "setuptools<70"
-"$venv/bin/python" -c "import mlagents.trainers, mlagents_envs.environment" 
+  grpcio "protobuf==3.20.3" "numpy==1.23.5" pyyaml Pillow cloudpickle filelock h5py "tensorboard==2.18.0" \
+  six absl-py attrs "cattrs==1.5.0" onnx huggingface-hub "setuptools<70"
+"$venv/bin/python" -c "import mlagents.trainers.learn, mlagents_envs.environment"
 echo "$want" > "$stamp"

@@ -55,6 +55,12 @@ def write_stub_executable(folder: Path, task: str) -> Path:
     return path
 
 
+@pytest.fixture(scope="session")
+def stub_launcher():
+    """(folder, task) -> path of a new ``Stub<Task>.x86_64`` in folder (usable at any scope)."""
+    return write_stub_executable
+
+
 @pytest.fixture
 def stub_executable(tmp_path):
     def make(task: str) -> Path:
@@ -77,7 +83,7 @@ def find_free_port() -> int:
     raise RuntimeError("no free TCP port found")
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def free_port():
     return find_free_port
 
