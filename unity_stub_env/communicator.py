@@ -10,6 +10,8 @@ session; ``request_stop`` (SIGTERM/SIGINT) makes the next wait send one status-4
 from __future__ import annotations
 
 import logging
+import signal
+import threading
 import time
 import uuid
 
@@ -79,6 +81,14 @@ def communication_versions_compatible(unity_version: str, trainer_version: str) 
     return unity[0] == trainer[0]
 
 
+class _AbortExchange(BaseException):
+    """Raised by SIGALRM inside a blocking exchange after a stop signal's grace period."""
+
+
+def _abort_exchange(*_args) -> None:
+    raise _AbortExchange()
+
+
 class RpcCommunicator:
     """One connection to a trainer at ``localhost:port``; Unity is the caller of every RPC."""
 
@@ -91,8 +101,12 @@ class RpcCommunicator:
         self._sent_brain_keys: set[str] = set()
 
     def request_stop(self, *_args) -> None:
-        """Signal-handler safe: only sets a flag the waiting loop checks."""
+        """Signal handler (SIGTERM/SIGINT): finish the pending exchange if the trainer answers
+        within ``_STOP_GRACE_S``, else abort it (SIGALRM) and send the closing status 400."""
         self.stop_requested = True
+        if threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer"):
+            signal.signal(signal.SIGALRM, _abort_exchange)
+            signal.setitimer(signal.ITIMER_REAL, _STOP_GRACE_S)
 
     # Connection and handshake ---------------------------------------------------------------
     def connect(self) -> None:
@@ -158,23 +172,17 @@ class RpcCommunicator:
         return answer.unity_input.rl_input
 
     def _exchange_raw(self, message: unity_message_pb2.UnityMessageProto) -> unity_message_pb2.UnityMessageProto:
-        future = self._stub.Exchange.future(message)
-        stop_deadline = None
-        while True:
-            try:
-                answer = future.result(timeout=_POLL_S)
-                break
-            except grpc.FutureTimeoutError:
-                if self.stop_requested and stop_deadline is None:
-                    stop_deadline = time.monotonic() + _STOP_GRACE_S
-                if stop_deadline is not None and time.monotonic() >= stop_deadline:
-                    future.cancel()
-                    self.close(send_closing=True)
-                    raise SessionEnd("Stopped by a signal; sent status 400 to the trainer.", 0) from None
-            except grpc.RpcError as error:
-                self._close_channel()
-                raise SessionEnd(f"The trainer at {self.address} went away ({error.code().name}); "
-                                 "quitting like a Unity player does.", 0) from None
+        # A plain blocking call: gRPC runs Python signal handlers while it waits, so SIGTERM
+        # still works, and no thread or future is created per exchange (the hot path).
+        try:
+            answer = self._stub.Exchange(message)
+        except _AbortExchange:
+            self.close(send_closing=True)
+            raise SessionEnd("Stopped by a signal; sent status 400 to the trainer.", 0) from None
+        except grpc.RpcError as error:
+            self._close_channel()
+            raise SessionEnd(f"The trainer at {self.address} went away ({error.code().name}); "
+                             "quitting like a Unity player does.", 0) from None
         if answer.header.status != STATUS_OK:
             self._close_channel()
             raise SessionEnd(f"The trainer closed the session (status {answer.header.status}).", 0)
@@ -185,6 +193,8 @@ class RpcCommunicator:
 
     def close(self, send_closing: bool) -> None:
         """Like Unity's ``Dispose``: one status-400 message (answer ignored), then shut down."""
+        if self.stop_requested and hasattr(signal, "setitimer"):
+            signal.setitimer(signal.ITIMER_REAL, 0)  # the abort timer is no longer needed
         if send_closing and self._stub is not None:
             try:
                 self._stub.Exchange(_wrap(None, STATUS_CLOSING), timeout=_CLOSE_TIMEOUT_S)

@@ -52,16 +52,20 @@ def _status_message(status: int) -> unity_message_pb2.UnityMessageProto:
     return message
 
 
+_DELIVERY_WAIT_S = 0.05  # upper bound; normally the RPC completes in well under a millisecond
+
+
 class _PendingCall:
     """One Exchange call the simulator is blocked in, and the answer it is waiting for."""
 
-    __slots__ = ("request", "response", "abandoned", "_answered")
+    __slots__ = ("request", "response", "abandoned", "_answered", "finished")
 
     def __init__(self, request: unity_message_pb2.UnityMessageProto) -> None:
         self.request = request
         self.response: unity_message_pb2.UnityMessageProto | None = None
         self.abandoned = False
         self._answered = threading.Event()
+        self.finished = threading.Event()  # the RPC is over: the answer has left this process
 
     def answer(self, response: unity_message_pb2.UnityMessageProto) -> None:
         if self.response is None:
@@ -102,6 +106,7 @@ class _Rendezvous(UnityToExternalProtoServicer):
 
     def _on_rpc_done(self, call: _PendingCall) -> None:
         """The RPC ended; if it was never answered the client went away (crash, cancel)."""
+        call.finished.set()
         if call.response is None:
             call.abandon()
             with self._cond:
@@ -303,6 +308,10 @@ class UnityEndpoint:
             raise RuntimeError("no simulator call is pending: receive() before sending again")
         call, self._pending = self._pending, None
         call.answer(response)
+        # Let gRPC's threads put the answer on the wire before the trainer goes back to work:
+        # otherwise they wait for the GIL while we process trajectories, and the simulator
+        # idles for that long. The wait ends as soon as the RPC completes (well under 1 ms).
+        call.finished.wait(_DELIVERY_WAIT_S)
 
     def _wait_for_call(self) -> _PendingCall:
         """Block until the simulator's next call arrives; it becomes the pending call."""
