@@ -1,0 +1,75 @@
+"""Helpers for end-to-end runs: mlagents-like-learn and the stub simulator as real processes."""
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def free_port_block(n: int = 1) -> int:
+    """A base port such that base..base+n-1 are currently free on 127.0.0.1."""
+    for _ in range(50):
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            base = s.getsockname()[1]
+        if base + n >= 65535:
+            continue
+        ok = True
+        for p in range(base, base + n):
+            with socket.socket() as t:
+                try:
+                    t.bind(("127.0.0.1", p))
+                except OSError:
+                    ok = False
+                    break
+        if ok:
+            return base
+    raise RuntimeError("no free port block")
+
+
+def learn(args: list[str], cwd: Path, timeout: float = 240, **kw) -> subprocess.CompletedProcess:
+    """Run mlagents-like-learn in a separate process (the console script's module)."""
+    cmd = [sys.executable, "-m", "trainer.cli", *args]
+    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout, **kw)
+
+
+BASIC_YAML = """
+behaviors:
+  Basic:
+    trainer_type: ppo
+    hyperparameters: {{batch_size: 32, buffer_size: 256, learning_rate: 3.0e-4, beta: 5.0e-3,
+                      epsilon: 0.2, lambd: 0.95, num_epoch: 3}}
+    network_settings: {{normalize: false, hidden_units: 20, num_layers: 1}}
+    reward_signals: {{extrinsic: {{gamma: 0.9, strength: 1.0}}}}
+    keep_checkpoints: {keep}
+    checkpoint_interval: {interval}
+    max_steps: {max_steps}
+    time_horizon: 3
+    summary_freq: {summary}
+"""
+
+
+@pytest.fixture
+def basic_config(tmp_path):
+    def make(max_steps=1500, interval=500, summary=500, keep=5, name="basic.yaml"):
+        p = tmp_path / name
+        p.write_text(textwrap.dedent(BASIC_YAML.format(max_steps=max_steps, interval=interval,
+                                                       summary=summary, keep=keep)))
+        return p
+
+    return make
+
+
+@pytest.fixture
+def env_no_proxy():
+    env = dict(os.environ)
+    for k in ("http_proxy", "https_proxy", "HTTP_PROXY", "HTTPS_PROXY", "grpc_proxy"):
+        env.pop(k, None)
+    return env

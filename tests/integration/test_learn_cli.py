@@ -1,0 +1,173 @@
+"""mlagents-like-learn end to end against the stub simulator: outputs, resume, and bad input.
+
+Every run here is a real trainer process serving real gRPC to a real stub process.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from tests.integration.conftest import free_port_block, learn
+
+
+def scalars(folder):
+    acc = EventAccumulator(str(folder), size_guidance={"scalars": 0, "tensors": 0})
+    acc.Reload()
+    return {tag: [(e.step, e.value) for e in acc.Scalars(tag)] for tag in acc.Tags()["scalars"]}, acc
+
+
+def test_basic_run_writes_mlagents_outputs(tmp_path, basic_config, env_no_proxy):
+    cfg = basic_config(max_steps=1500, interval=500, summary=500, keep=2)
+    port = free_port_block()
+    r = learn([str(cfg), "--env", "stub:basic", "--run-id", "r1", "--results-dir", str(tmp_path / "results"),
+               "--base-port", str(port), "--seed", "3", "--no-graphics"], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    run = tmp_path / "results" / "r1"
+    # the console summary line in ML-Agents' format, at summary_freq multiples
+    assert "Basic. Step: 500. Time Elapsed:" in r.stdout
+    assert "Mean Reward:" in r.stdout and "Connected new brain: Basic?team=0" in r.stdout
+    for f in ["configuration.yaml", "run_logs/timers.json", "run_logs/training_status.json",
+              "run_logs/Player-0.log", "Basic.onnx", "Basic/checkpoint.pt"]:
+        assert (run / f).is_file(), f
+    status = json.loads((run / "run_logs/training_status.json").read_text())
+    ckpts = status["Basic"]["checkpoints"]
+    assert len(ckpts) == 2  # keep_checkpoints 2 trims older ones (and their files)
+    steps = [c["steps"] for c in ckpts]
+    assert steps == sorted(steps) and steps[-1] > 1500
+    for c in ckpts:
+        assert os.path.isfile(c["file_path"]) and c["file_path"].endswith(".onnx")
+        assert all(os.path.isfile(p) for p in c["auxillary_file_paths"])
+    onnx_files = sorted(p.name for p in (run / "Basic").glob("Basic-*.onnx"))
+    assert len(onnx_files) == 2
+    assert status["Basic"]["final_checkpoint"]["file_path"].endswith("Basic.onnx")
+    assert status["metadata"]["stats_format_version"] == "0.3.0"
+    # TensorBoard events, read back
+    tags, acc = scalars(run / "Basic")
+    for tag in ["Environment/Cumulative Reward", "Environment/Episode Length", "Losses/Policy Loss",
+                "Losses/Value Loss", "Policy/Entropy", "Policy/Learning Rate", "Policy/Epsilon", "Policy/Beta",
+                "Policy/Extrinsic Value Estimate", "Policy/Extrinsic Reward"]:
+        assert tag in tags, (tag, sorted(tags))
+    assert [s for s, _ in tags["Environment/Cumulative Reward"]][:3] == [500, 1000, 1500]
+    assert "Is Training" not in tags and "Step" not in tags
+    # the learning rate decays linearly from 3e-4 towards 1e-10 over max_steps
+    lr = dict(tags["Policy/Learning Rate"])
+    assert all(0 < v < 3.0e-4 for v in lr.values())
+    timers = json.loads((run / "run_logs/timers.json").read_text())
+    assert timers["name"] == "root" and timers["metadata"]["communication_protocol_version"] == "1.5.0"
+    # an existing run id is refused without --resume/--force, with one message and exit 2
+    r2 = learn([str(cfg), "--env", "stub:basic", "--run-id", "r1", "--results-dir", str(tmp_path / "results"),
+                "--base-port", str(port)], cwd=tmp_path, env=env_no_proxy)
+    assert r2.returncode == 2
+    assert "--resume" in r2.stderr and "--force" in r2.stderr and "Traceback" not in r2.stderr
+
+
+def test_resume_continues_at_saved_step(tmp_path, basic_config, env_no_proxy):
+    port = free_port_block()
+    res = str(tmp_path / "results")
+    r = learn([str(basic_config(max_steps=600, interval=300)), "--env", "stub:basic", "--run-id", "r",
+               "--results-dir", res, "--base-port", str(port), "--seed", "1"], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    first = json.loads((tmp_path / "results/r/run_logs/training_status.json").read_text())
+    first_step = first["Basic"]["final_checkpoint"]["steps"]
+    assert first_step > 600
+    cfg2 = basic_config(max_steps=1200, interval=300, name="more.yaml")
+    r = learn([str(cfg2), "--env", "stub:basic", "--run-id", "r", "--results-dir", res, "--resume",
+               "--base-port", str(port), "--seed", "1"], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert f"at step {first_step}" in r.stdout
+    second = json.loads((tmp_path / "results/r/run_logs/training_status.json").read_text())
+    assert second["Basic"]["final_checkpoint"]["steps"] > 1200
+    assert min(c["steps"] for c in second["Basic"]["checkpoints"]) <= first_step + 300
+
+
+@pytest.mark.parametrize("case", ["malformed", "unknown_key", "wrong_type", "missing_env", "missing_yaml"])
+def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
+    cfg = tmp_path / "c.yaml"
+    args = [str(cfg), "--env", "stub:basic", "--results-dir", str(tmp_path / "res")]
+    expect = ""
+    if case == "malformed":
+        cfg.write_text("behaviors:\n  Basic: [unclosed\n")
+        expect = "c.yaml"
+    elif case == "unknown_key":
+        cfg.write_text("behaviors:\n  Basic:\n    trainer_type: ppo\n    hyperparameters:\n      lamda: 0.9\n")
+        expect = "lambd"
+    elif case == "wrong_type":
+        cfg.write_text("behaviors:\n  Basic:\n    trainer_type: ppo\n    hyperparameters:\n      batch_size: big\n")
+        expect = "batch_size"
+    elif case == "missing_env":
+        cfg.write_text("behaviors: {}\n")
+        args = [str(cfg), "--env", str(tmp_path / "NoSuchGame"), "--results-dir", str(tmp_path / "res")]
+        expect = "NoSuchGame"
+    elif case == "missing_yaml":
+        expect = "c.yaml"
+    r = learn(args, cwd=tmp_path, timeout=60, env=env_no_proxy)
+    assert r.returncode == 2, (r.stdout[-2000:], r.stderr[-2000:])
+    assert expect in r.stderr
+    assert "Traceback" not in r.stderr and "Traceback" not in r.stdout
+
+
+def test_port_in_use_is_a_clear_error(tmp_path, basic_config, env_no_proxy):
+    with socket.socket() as blocker:
+        blocker.bind(("127.0.0.1", 0))
+        blocker.listen(1)
+        port = blocker.getsockname()[1]
+        r = learn([str(basic_config()), "--env", "stub:basic", "--base-port", str(port),
+                   "--results-dir", str(tmp_path / "res")], cwd=tmp_path, timeout=60, env=env_no_proxy)
+    assert r.returncode == 2
+    assert str(port) in r.stderr and "Traceback" not in r.stderr
+
+
+def test_simulator_that_never_connects_times_out(tmp_path, basic_config, env_no_proxy):
+    game = tmp_path / "Silent.x86_64"
+    game.write_text("#!/bin/sh\nexec sleep 120\n")
+    game.chmod(0o755)
+    r = learn([str(basic_config()), "--env", str(tmp_path / "Silent"), "--timeout-wait", "2",
+               "--base-port", str(free_port_block()), "--results-dir", str(tmp_path / "res")],
+              cwd=tmp_path, timeout=60, env=env_no_proxy)
+    assert r.returncode == 2
+    assert "--timeout-wait" in r.stderr or "timeout" in r.stderr.lower()
+    assert "Traceback" not in r.stderr
+
+
+def test_simulator_that_dies_is_reported(tmp_path, basic_config, env_no_proxy):
+    game = tmp_path / "Crash.x86_64"
+    game.write_text("#!/bin/sh\nexit 3\n")
+    game.chmod(0o755)
+    r = learn([str(basic_config()), "--env", str(tmp_path / "Crash"), "--timeout-wait", "30",
+               "--base-port", str(free_port_block()), "--results-dir", str(tmp_path / "res")],
+              cwd=tmp_path, timeout=60, env=env_no_proxy)
+    assert r.returncode == 2
+    assert "Crash" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_sigint_saves_a_checkpoint_and_onnx(tmp_path, basic_config, env_no_proxy):
+    cfg = basic_config(max_steps=10_000_000, interval=10_000_000, summary=1000)
+    cmd = [sys.executable, "-m", "trainer.cli", str(cfg), "--env", "stub:basic", "--run-id", "stop",
+           "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env_no_proxy)
+    try:
+        lines = []
+        for line in proc.stdout:  # wait until training has produced at least one summary
+            lines.append(line)
+            if "Basic. Step: 1000." in line:
+                break
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    text = "".join(lines) + out
+    assert "Learning was interrupted" in text
+    run = tmp_path / "results" / "stop"
+    assert (run / "Basic.onnx").is_file() and (run / "Basic" / "checkpoint.pt").is_file()
+    status = json.loads((run / "run_logs/training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] >= 1000

@@ -1,0 +1,181 @@
+"""One brain's training state in a run: its PPO trainer, settings, summaries and checkpoints.
+
+The run loop (trainer/run.py) owns the simulators and the data flow; a ``BehaviorRunner`` owns
+what belongs to one brain name: when to summarise, when to checkpoint, what to write where.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
+from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
+from trainer.errors import UserError
+from trainer.ppo.buffer import Trajectory
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.trainer import PPOTrainer
+from trainer.protocol.types import BehaviorSpec
+
+logger = logging.getLogger("mlagents_like")
+
+
+def hyperparams_from_settings(settings) -> PPOHyperparams:
+    """Map a behavior's TrainerSettings (trainer/config) onto the PPO room's own dataclass."""
+    h = settings.hyperparameters
+    n = settings.network_settings
+    return PPOHyperparams(
+        batch_size=h.batch_size,
+        buffer_size=h.buffer_size,
+        learning_rate=h.learning_rate,
+        beta=h.beta,
+        epsilon=h.epsilon,
+        lambd=h.lambd,
+        num_epoch=h.num_epoch,
+        learning_rate_schedule=h.learning_rate_schedule,
+        beta_schedule=h.beta_schedule,
+        epsilon_schedule=h.epsilon_schedule,
+        max_steps=settings.max_steps,
+        normalize=n.normalize,
+        hidden_units=n.hidden_units,
+        num_layers=n.num_layers,
+        vis_encode_type=n.vis_encode_type,
+        deterministic=n.deterministic,
+        memory=n.memory is not None,
+        reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
+    )
+
+
+@dataclass
+class CheckpointPaths:
+    run_dir: str
+    brain: str
+
+    @property
+    def folder(self) -> str:
+        return os.path.join(self.run_dir, self.brain)
+
+    def step_files(self, step: int) -> tuple[str, str]:
+        base = os.path.join(self.folder, f"{self.brain}-{step}")
+        return base + ".onnx", base + ".pt"
+
+    @property
+    def latest(self) -> str:
+        return os.path.join(self.folder, "checkpoint.pt")
+
+    @property
+    def final_onnx(self) -> str:
+        return os.path.join(self.run_dir, f"{self.brain}.onnx")
+
+
+@dataclass
+class BehaviorRunner:
+    brain: str
+    spec: BehaviorSpec
+    settings: object  # TrainerSettings
+    trainer: PPOTrainer
+    paths: CheckpointPaths
+    training: bool
+    next_summary: int = 0
+    next_checkpoint: int = 0
+    reward_buffer: deque = field(default_factory=lambda: deque(maxlen=1000))
+    returns_since_checkpoint: list[float] = field(default_factory=list)
+    last_checkpoint_step: int = -1
+
+    @classmethod
+    def create(cls, brain: str, spec: BehaviorSpec, settings, run_dir: str, seed: int, device: str,
+               training: bool) -> "BehaviorRunner":
+        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device)
+        runner = cls(brain, spec, settings, trainer, CheckpointPaths(run_dir, brain), training)
+        os.makedirs(runner.paths.folder, exist_ok=True)
+        return runner
+
+    # ----------------------------------------------------------------------------- lifecycle
+    def restore(self, path: str, reset_step: bool) -> None:
+        """--resume (reset_step False) or --initialize-from / init_path (reset_step True)."""
+        if not os.path.isfile(path):
+            raise UserError(
+                f"No checkpoint for behavior '{self.brain}' at {path}. Check --run-id / --initialize-from, "
+                "or start a new run without --resume."
+            )
+        state = load_checkpoint(path)
+        try:
+            self.trainer.load_state_dict(state)
+        except (KeyError, RuntimeError, ValueError) as err:
+            raise UserError(
+                f"Checkpoint {path} does not fit behavior '{self.brain}' (its network or observation/action "
+                f"spec differs): {err}. Use a checkpoint of the same configuration or start fresh with --force."
+            ) from None
+        if reset_step:
+            self.trainer.step = 0
+        logger.info("Loaded %s for behavior %s at step %d.", path, self.brain, self.trainer.step)
+
+    def schedule_from_step(self) -> None:
+        s = self.settings
+        step = self.trainer.step
+        self.next_summary = (step // s.summary_freq + 1) * s.summary_freq
+        interval = self.checkpoint_interval
+        self.next_checkpoint = (step // interval + 1) * interval
+
+    @property
+    def checkpoint_interval(self) -> int:
+        s = self.settings
+        if s.even_checkpoints:
+            return max(1, s.max_steps // max(1, s.keep_checkpoints))
+        return max(1, s.checkpoint_interval)
+
+    @property
+    def max_steps(self) -> int:
+        return self.settings.max_steps
+
+    @property
+    def done(self) -> bool:
+        return not self.training or self.trainer.step > self.settings.max_steps
+
+    # ----------------------------------------------------------------------------- experience
+    def add_trajectory(self, traj: Trajectory, status: TrainingStatus) -> dict[str, float]:
+        """Checkpoint if this trajectory crosses the next interval (named with the step before it),
+        then hand it to PPO."""
+        if not self.training:
+            return {}
+        if self.trainer.step + len(traj) >= self.next_checkpoint:
+            self.save_checkpoint(status)
+            while self.next_checkpoint <= self.trainer.step + len(traj):
+                self.next_checkpoint += self.checkpoint_interval
+        return self.trainer.process_trajectory(traj)
+
+    def add_episodes(self, returns: list[float]) -> None:
+        self.reward_buffer.extend(returns)
+        self.returns_since_checkpoint.extend(returns)
+
+    # ----------------------------------------------------------------------------- files
+    def save_checkpoint(self, status: TrainingStatus, final: bool = False) -> str:
+        step = self.trainer.step
+        onnx_path, pt_path = self.paths.step_files(step)
+        state = self.trainer.state_dict()
+        save_checkpoint(pt_path, state)
+        save_checkpoint(self.paths.latest, state)
+        self.trainer.export_onnx(onnx_path)
+        logger.info("Exported %s", onnx_path)
+        reward = float(np.mean(self.returns_since_checkpoint)) if self.returns_since_checkpoint else None
+        self.returns_since_checkpoint = []
+        entry = CheckpointEntry(steps=step, file_path=onnx_path, reward=reward, creation_time=time.time(),
+                                auxillary_file_paths=[pt_path])
+        if step != self.last_checkpoint_step:
+            for old in status.add_checkpoint(self.brain, entry, self.settings.keep_checkpoints):
+                for f in [old.file_path, *old.auxillary_file_paths]:
+                    if f and os.path.exists(f) and f not in (onnx_path, pt_path):
+                        os.remove(f)
+        self.last_checkpoint_step = step
+        if final:
+            shutil.copyfile(onnx_path, self.paths.final_onnx)
+            logger.info("Copied %s to %s.", onnx_path, self.paths.final_onnx)
+            status.set_final_checkpoint(self.brain, CheckpointEntry(
+                steps=step, file_path=self.paths.final_onnx, reward=reward, creation_time=entry.creation_time,
+                auxillary_file_paths=[pt_path]))
+        return onnx_path
