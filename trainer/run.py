@@ -269,7 +269,8 @@ def run_training(options) -> int:
     ck = options.checkpoint_settings
     env = options.env_settings
     status_path = os.path.join(run_dir, "run_logs", "training_status.json")
-    status = TrainingStatus.load(status_path) if ck.resume and os.path.isfile(status_path) else TrainingStatus()
+    keep_status = (ck.resume or ck.inference) and os.path.isfile(status_path)
+    status = TrainingStatus.load(status_path) if keep_status else TrainingStatus()
     restore = {p: status.get_lesson_num(p) for p in options.environment_parameters} if ck.resume else None
     params = EnvironmentParameterManager(options.environment_parameters, env.seed,
                                          {k: v for k, v in (restore or {}).items() if v is not None})
@@ -336,9 +337,10 @@ def finish_run(state: RunState) -> None:
     for runner in state.runners.values():
         if runner.training and runner.trainer.step > 0:
             runner.save_checkpoint(state.status, final=True)
-    for name, lesson in state.params.lesson_numbers().items():
-        state.status.set_lesson_num(name, lesson)
-    state.status.save(os.path.join(run_dir, "run_logs", "training_status.json"))
+    if not state.options.checkpoint_settings.inference:  # inference leaves the training record alone
+        for name, lesson in state.params.lesson_numbers().items():
+            state.status.set_lesson_num(name, lesson)
+        state.status.save(os.path.join(run_dir, "run_logs", "training_status.json"))
     state.timers.write(os.path.join(run_dir, "run_logs", "timers.json"))
     state.reporter.close()
     write_run_options(state.options, run_dir)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 
@@ -40,6 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--connect-timeout", type=float, default=60.0,
                         help="seconds to keep retrying the connection to the trainer (default 60)")
     parser.add_argument("--list", action="store_true", help="list the tasks with their specs and exit")
+    parser.add_argument("--crash-after", type=int, default=None, metavar="N",
+                        help="fault injection for tests: exit with code 3 after N exchanges, "
+                             "without closing the connection (like a crashed player)")
     parser.add_argument("-logFile", dest="log_file", default=None, help="write the log here ('-' = stdout)")
     parser.add_argument("-nographics", action="store_true", help="accepted; the stub never renders")
     parser.add_argument("-batchmode", action="store_true", help="accepted; the stub is always headless")
@@ -118,7 +122,13 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
     logger.info("Task %s: behavior %s, %d agents (%d areas), seed %d, decision period %d",
                 task.name, academy.behavior_key, task.num_agents, num_areas, seed, academy.decision_period)
     brain_parameters = build_brain_parameters(academy.behavior_key, task.action_spec)
+    exchanges = 0
     while True:
+        if args.crash_after is not None and exchanges >= args.crash_after:
+            logger.error("Crashing on purpose after %d exchanges (--crash-after).", exchanges)
+            logging.shutdown()
+            os._exit(3)
+        exchanges += 1
         infos = academy.collect_infos()
         rl_input = communicator.exchange(academy.behavior_key, infos, brain_parameters,
                                          encode_stats(academy.take_stats()))

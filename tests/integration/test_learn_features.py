@@ -1,0 +1,117 @@
+"""Run-level features end to end: several envs, curriculum, simulator stats, restarts, inference."""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import textwrap
+
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from tests.integration.conftest import BASIC_YAML, free_port_block, learn
+
+
+def tb_scalars(folder) -> dict[str, list[tuple[int, float]]]:
+    acc = EventAccumulator(str(folder), size_guidance={"scalars": 0})
+    acc.Reload()
+    return {tag: [(e.step, e.value) for e in acc.Scalars(tag)] for tag in acc.Tags()["scalars"]}
+
+
+def test_two_envs_curriculum_and_simulator_stats(tmp_path, env_no_proxy):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(textwrap.dedent(BASIC_YAML.format(max_steps=1200, interval=100000, summary=400, keep=5)) + textwrap.dedent("""
+        environment_parameters:
+          difficulty:
+            curriculum:
+              - name: Easy
+                value: 0.0
+                completion_criteria: {behavior: Basic, measure: progress, threshold: 0.5, require_reset: true}
+              - name: Hard
+                value: {sampler_type: uniform, sampler_parameters: {min_value: 1.0, max_value: 2.0}}
+        """))
+    port = free_port_block(2)
+    r = learn([str(cfg), "--env", "stub:basic", "--num-envs", "2", "--run-id", "c", "--seed", "5",
+               "--results-dir", str(tmp_path / "results"), "--base-port", str(port)], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    run = tmp_path / "results" / "c"
+    # one simulator per env, each with its own Player log on base_port + i
+    assert (run / "run_logs/Player-0.log").is_file() and (run / "run_logs/Player-1.log").is_file()
+    assert "Parameter 'difficulty' is in lesson 'Easy' and has value 'Float: value=0.0'" in r.stdout
+    assert "Parameter 'difficulty' is in lesson 'Hard' and has value 'Uniform sampler: min=1.0, max=2.0'" in r.stdout
+    status = json.loads((run / "run_logs/training_status.json").read_text())
+    assert status["difficulty"] == {"lesson_num": 1}
+    tags = tb_scalars(run / "Basic")
+    lessons = tags["Environment/Lesson Number/difficulty"]
+    assert lessons[0][1] == 0.0 and lessons[-1][1] == 1.0  # progress 0.5 of 1200 steps: lesson 0 at the 400 summary, 1 from 800
+    # a stat the simulator sends on the stats side channel lands under its own name
+    assert "Basic/Large Goal Reached" in tags
+    assert all(0.0 <= v <= 1.0 for _, v in tags["Basic/Large Goal Reached"])
+    # the RESET required by the lesson change reached the simulators
+    logs = (run / "run_logs/Player-0.log").read_text() + (run / "run_logs/Player-1.log").read_text()
+    assert "Environment reset by the trainer" in logs
+
+
+def _flaky_game(tmp_path, crash_after: int) -> str:
+    """A 'Unity build' whose first launch crashes after a few exchanges; later launches are fine."""
+    mark = tmp_path / "crashed-once"
+    game = tmp_path / "Flaky.x86_64"
+    game.write_text(textwrap.dedent(f"""\
+        #!/bin/sh
+        if [ ! -f "{mark}" ]; then
+          touch "{mark}"
+          exec "{sys.executable}" -m unity_stub_env.cli --task basic --crash-after {crash_after} "$@"
+        fi
+        exec "{sys.executable}" -m unity_stub_env.cli --task basic "$@"
+        """))
+    game.chmod(0o755)
+    return str(tmp_path / "Flaky")
+
+
+def test_crashed_simulator_is_restarted_and_training_finishes(tmp_path, basic_config, env_no_proxy):
+    game = _flaky_game(tmp_path, crash_after=300)
+    r = learn([str(basic_config(max_steps=900)), "--env", game, "--run-id", "f", "--timeout-wait", "10",
+               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
+              cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "restarting it and resetting all environments" in r.stdout
+    status = json.loads((tmp_path / "results/f/run_logs/training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] > 900
+
+
+def test_crash_without_restarts_left_is_a_clear_error(tmp_path, basic_config, env_no_proxy):
+    game = _flaky_game(tmp_path, crash_after=50)
+    r = learn([str(basic_config(max_steps=900)), "--env", game, "--run-id", "g", "--timeout-wait", "10",
+               "--max-lifetime-restarts", "0", "--results-dir", str(tmp_path / "results"),
+               "--base-port", str(free_port_block())], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 2
+    assert "exited" in r.stderr and "Player-" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_inference_runs_the_saved_policy_without_training(tmp_path, basic_config, env_no_proxy):
+    port = free_port_block()
+    res = str(tmp_path / "results")
+    r = learn([str(basic_config(max_steps=600, interval=300)), "--env", "stub:basic", "--run-id", "i",
+               "--results-dir", res, "--base-port", str(port)], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-2000:]
+    status_file = tmp_path / "results/i/run_logs/training_status.json"
+    before = json.loads(status_file.read_text())["Basic"]
+    cmd = [sys.executable, "-m", "trainer.cli", str(basic_config(max_steps=600)), "--env", "stub:basic",
+           "--run-id", "i", "--results-dir", res, "--base-port", str(port), "--inference"]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env_no_proxy)
+    try:
+        seen = []
+        for line in proc.stdout:
+            seen.append(line)
+            if "Loaded" in line and "checkpoint.pt" in line:
+                break
+        proc.send_signal(signal.SIGTERM)  # what Slurm or a user's kill sends
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, "".join(seen) + out
+    after = json.loads(status_file.read_text())["Basic"]
+    assert after["checkpoints"] == before["checkpoints"]  # inference writes no new checkpoint
+    assert f"at step {before['final_checkpoint']['steps']}" in "".join(seen)
