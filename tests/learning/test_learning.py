@@ -1,0 +1,37 @@
+"""Learning proofs: fixed seeds, real gRPC, the stub as a separate process, bounded steps.
+
+Thresholds are read back from the TensorBoard events the run wrote (Environment/Cumulative
+Reward at the last summaries), i.e. the number a user would look at.
+"""
+from __future__ import annotations
+
+import shutil
+
+import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from tests.integration.conftest import ROOT, free_port_block, learn
+from unity_stub_env.tasks.basic import OPTIMAL_RETURN
+
+pytestmark = pytest.mark.slow
+
+
+def cumulative_reward(folder) -> list[tuple[int, float]]:
+    acc = EventAccumulator(str(folder), size_guidance={"scalars": 0})
+    acc.Reload()
+    return [(e.step, e.value) for e in acc.Scalars("Environment/Cumulative Reward")]
+
+
+def test_basic_reaches_90_percent_of_optimal_within_20k_steps(tmp_path, env_no_proxy):
+    """configs/basic.yaml as shipped (20,000 steps), 4 areas, seed 1: the last summary's mean
+    return must be >= 0.9 * 0.93 (walk right 7 steps: 7 * -0.01 + 1.0)."""
+    cfg = tmp_path / "basic.yaml"
+    shutil.copy(ROOT / "configs" / "basic.yaml", cfg)
+    r = learn([str(cfg), "--env", "stub:basic", "--num-areas", "4", "--seed", "1", "--run-id", "b",
+               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
+              cwd=tmp_path, timeout=600, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    curve = cumulative_reward(tmp_path / "results" / "b" / "Basic")
+    assert curve[-1][0] == 20000
+    assert curve[0][1] < 0.5 * OPTIMAL_RETURN  # it starts far from optimal...
+    assert curve[-1][1] >= 0.9 * OPTIMAL_RETURN, curve  # ...and ends within 10% of it
