@@ -1,0 +1,250 @@
+"""Training benchmark (run by hand, not a test): our trainer vs the real ``mlagents-learn`` 1.1.0.
+
+    .venv/bin/python bench/train.py [--task basic|ball3d] [--config YAML] [--max-steps N]
+                                    [--num-areas N] [--seed S] [--out bench/out]
+
+One run trains the same stub task with the same YAML twice, one process after the other:
+  (1) ours:      ``.venv/bin/mlagents-like-learn CONFIG --env stub:TASK``
+  (2) reference: ``.venv-interop/bin/mlagents-learn CONFIG --env <tmp>/Stub<Task>.x86_64``, a shell
+                 launcher that execs this interpreter's ``-m unity_stub_env.cli --task TASK``.
+Both get the same ``--seed``, ``--num-areas``, a fresh results dir and a fresh port.
+
+The YAML is copied to a temp dir and, for BOTH trainers alike, ``max_steps`` is overridden when
+``--max-steps`` is given and ``checkpoint_interval`` is raised above ``max_steps``: mlagents 1.1.0
+exports ONNX at every checkpoint with ``torch.onnx.export`` (dynamo by default on torch 2.13, which
+needs ``onnxscript``), so a checkpoint inside the run would crash the reference. Its FINAL export
+still fails (exit code 1, ``No module named 'onnxscript'``) after the last summary was written;
+that outcome is recorded and the run is still measured from its TensorBoard events.
+
+Reported per trainer:
+  * wall_s            process start to exit (imports, env launch, training, final save/export)
+  * agent_steps_per_s final summary step / wall_s (steps count agent-steps, as in ML-Agents)
+  * steady_steps_per_s (last - first summary step) / (their event wall_time difference): no startup
+  * mean reward (``Environment/Cumulative Reward``) at every summary step, side by side
+Then the speed ratios and whether our reward over the last 3 common summaries is no worse.
+Prints a markdown table; writes JSON to ``<out>/train_<task>.json``.
+Target: ours >= 10x the reference's agent-steps/s with reward at equal steps no worse.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import socket
+import stat
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+REPO = Path(__file__).resolve().parents[1]
+OUR_LEARN = REPO / ".venv" / "bin" / "mlagents-like-learn"
+REFERENCE_LEARN = REPO / ".venv-interop" / "bin" / "mlagents-learn"
+OUR_PYTHON = REPO / ".venv" / "bin" / "python"  # runs the stub behind the reference
+REWARD_TAG = "Environment/Cumulative Reward"
+TARGET_SPEEDUP = 10.0
+LAST_SUMMARIES = 3
+ONNXSCRIPT_FAILURE = "No module named 'onnxscript'"
+
+
+def free_port() -> int:
+    """A port free on 127.0.0.1 and on the IPv6 wildcard (mlagents binds ``[::]:port``)."""
+    for _ in range(50):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            probe.bind(("127.0.0.1", 0))
+            port = probe.getsockname()[1]
+        try:
+            with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as probe6:
+                probe6.bind(("::", port))
+        except OSError:
+            continue
+        return port
+    raise RuntimeError("no free TCP port found")
+
+
+def stub_launcher(folder: Path, task: str) -> Path:
+    """``folder/Stub<Task>.x86_64``: a Unity-build-like shell launcher of the stub (this Python)."""
+    name = "Stub" + "".join(ch for ch in task.title() if ch.isalnum())
+    path = folder / f"{name}.x86_64"
+    path.write_text(f'#!/bin/sh\nexec "{OUR_PYTHON}" -m unity_stub_env.cli --task {task} "$@"\n')
+    path.chmod(path.stat().st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)
+    return path
+
+
+def write_bench_config(source: Path, target: Path, max_steps: int | None) -> dict:
+    """Copy the trainer YAML with ``max_steps`` overridden and checkpoints pushed past the end."""
+    config = yaml.safe_load(source.read_text())
+    for settings in config["behaviors"].values():
+        if max_steps is not None:
+            settings["max_steps"] = max_steps
+        settings["checkpoint_interval"] = 100 * int(settings.get("max_steps", 500000))
+    target.write_text(yaml.safe_dump(config, sort_keys=False))
+    return config
+
+
+def run_trainer(command: list[str], cwd: Path, env: dict[str, str], timeout: float,
+                log_path: Path) -> dict:
+    """Run one trainer process (output to log_path); returns exit code, wall seconds, output tail."""
+    started = time.perf_counter()
+    with open(log_path, "w") as log:
+        completed = subprocess.run(command, cwd=cwd, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                   timeout=timeout)
+    wall = time.perf_counter() - started
+    output = log_path.read_text(errors="replace")
+    return {"returncode": completed.returncode, "wall_s": wall, "output_tail": output[-3000:],
+            "onnx_export_failed": ONNXSCRIPT_FAILURE in output, "log": str(log_path)}
+
+
+def read_rewards(behavior_dir: Path) -> list[dict]:
+    """``[{step, wall_time, value}]`` of the cumulative-reward scalar, in step order."""
+    events = EventAccumulator(str(behavior_dir), size_guidance={"scalars": 0})
+    events.Reload()
+    if REWARD_TAG not in events.Tags().get("scalars", []):
+        return []
+    return [{"step": e.step, "wall_time": e.wall_time, "value": e.value}
+            for e in sorted(events.Scalars(REWARD_TAG), key=lambda e: e.step)]
+
+
+def timers_total(run_dir: Path) -> float | None:
+    path = run_dir / "run_logs" / "timers.json"
+    try:
+        return float(json.loads(path.read_text())["total"])
+    except (OSError, KeyError, ValueError, TypeError):
+        return None
+
+
+def summarize(label: str, run: dict, rewards: list[dict], run_dir: Path) -> dict:
+    """Rates from the process wall time and from the summary events' own wall times."""
+    final_step = rewards[-1]["step"] if rewards else 0
+    steady = None
+    if len(rewards) >= 2:
+        span = rewards[-1]["wall_time"] - rewards[0]["wall_time"]
+        steady = (rewards[-1]["step"] - rewards[0]["step"]) / span if span > 0 else None
+    return {"trainer": label, **run, "final_step": final_step,
+            "agent_steps_per_s": final_step / run["wall_s"] if run["wall_s"] > 0 else None,
+            "steady_steps_per_s": steady, "timers_total_s": timers_total(run_dir),
+            "rewards": rewards}
+
+
+def train(label: str, learn: Path, env_arg: str, config: Path, workdir: Path, args,
+          behavior: str, env: dict[str, str]) -> dict:
+    workdir.mkdir(parents=True, exist_ok=True)
+    results = workdir / "results"
+    command = [str(learn), str(config), "--env", env_arg, "--run-id", label,
+               "--results-dir", str(results), "--base-port", str(free_port()),
+               "--seed", str(args.seed), "--no-graphics"]
+    if args.num_areas is not None:
+        command += ["--num-areas", str(args.num_areas)]
+    print(f"[{label}] {' '.join(command)}", flush=True)
+    log_path = args.out / f"train_{args.task}_{label}.log"
+    run = run_trainer(command, workdir, env, args.timeout, log_path)
+    run_dir = results / label
+    summary = summarize(label, run, read_rewards(run_dir / behavior), run_dir)
+    print(f"[{label}] exit {run['returncode']} after {run['wall_s']:.1f} s, "
+          f"final step {summary['final_step']}", flush=True)
+    return summary
+
+
+def compare(ours: dict, reference: dict) -> dict:
+    """Speed ratios and the reward check over the last common summary steps."""
+    ref_by_step = {r["step"]: r["value"] for r in reference["rewards"]}
+    common = [r["step"] for r in ours["rewards"] if r["step"] in ref_by_step]
+    last = common[-LAST_SUMMARIES:]
+    ours_by_step = {r["step"]: r["value"] for r in ours["rewards"]}
+    ours_mean = sum(ours_by_step[s] for s in last) / len(last) if last else None
+    ref_mean = sum(ref_by_step[s] for s in last) / len(last) if last else None
+
+    def ratio(key: str) -> float | None:
+        a, b = ours.get(key), reference.get(key)
+        return a / b if a and b else None
+
+    speedup = ratio("agent_steps_per_s")
+    reward_ok = ours_mean is not None and ref_mean is not None and ours_mean >= ref_mean
+    return {"speedup_agent_steps_per_s": speedup, "speedup_steady": ratio("steady_steps_per_s"),
+            "compared_steps": last, "ours_last_mean_reward": ours_mean,
+            "reference_last_mean_reward": ref_mean, "reward_no_worse": reward_ok,
+            "target_met": bool(speedup and speedup >= TARGET_SPEEDUP and reward_ok)}
+
+
+def fmt(value, spec: str = ".1f") -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def markdown(task: str, ours: dict, reference: dict, verdict: dict) -> str:
+    lines = [f"### train benchmark: {task}", "",
+             "| trainer | exit | wall s | final step | agent-steps/s | steady steps/s | timers total s |",
+             "|---|---|---|---|---|---|---|"]
+    for row in (ours, reference):
+        lines.append(f"| {row['trainer']} | {row['returncode']} | {fmt(row['wall_s'])} | "
+                     f"{row['final_step']} | {fmt(row['agent_steps_per_s'])} | "
+                     f"{fmt(row['steady_steps_per_s'])} | {fmt(row['timers_total_s'])} |")
+    lines += ["", "| step | ours reward | reference reward |", "|---|---|---|"]
+    ref_by_step = {r["step"]: r["value"] for r in reference["rewards"]}
+    ours_by_step = {r["step"]: r["value"] for r in ours["rewards"]}
+    for step in sorted(set(ref_by_step) | set(ours_by_step)):
+        lines.append(f"| {step} | {fmt(ours_by_step.get(step), '.3f')} | "
+                     f"{fmt(ref_by_step.get(step), '.3f')} |")
+    lines += ["",
+              f"speed ratio (agent-steps/s): {fmt(verdict['speedup_agent_steps_per_s'], '.2f')}x, "
+              f"steady-state: {fmt(verdict['speedup_steady'], '.2f')}x (target >= {TARGET_SPEEDUP:g}x)",
+              f"mean reward over steps {verdict['compared_steps']}: ours "
+              f"{fmt(verdict['ours_last_mean_reward'], '.3f')} vs reference "
+              f"{fmt(verdict['reference_last_mean_reward'], '.3f')} -> no worse: "
+              f"{verdict['reward_no_worse']}",
+              f"target met: {verdict['target_met']}"]
+    return "\n".join(lines)
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--task", choices=("basic", "ball3d"), default="ball3d")
+    parser.add_argument("--config", type=Path, default=None, help="default configs/<task>.yaml")
+    parser.add_argument("--max-steps", type=int, default=None)
+    parser.add_argument("--num-areas", type=int, default=None)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--out", type=Path, default=REPO / "bench" / "out")
+    parser.add_argument("--timeout", type=float, default=3600.0, help="per trainer, seconds")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    source = args.config or REPO / "configs" / f"{args.task}.yaml"
+    for needed in (OUR_LEARN, REFERENCE_LEARN):
+        if not needed.exists():
+            print(f"missing {needed}: run ./scripts/ensure_interop_venv.sh / install the project")
+            return 2
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)  # neither trainer may see the other's packages
+    args.out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=f"bench_train_{args.task}_") as tmp:
+        folder = Path(tmp)
+        config_path = folder / source.name
+        config = write_bench_config(source, config_path, args.max_steps)
+        behavior = next(iter(config["behaviors"]))
+        ours = train("ours", OUR_LEARN, f"stub:{args.task}", config_path, folder / "ours",
+                     args, behavior, env)
+        exe = stub_launcher(folder, args.task)
+        reference = train("reference", REFERENCE_LEARN, str(exe.with_suffix("")), config_path,
+                          folder / "reference", args, behavior, env)
+    verdict = compare(ours, reference)
+    print(markdown(args.task, ours, reference, verdict))
+    args.out.mkdir(parents=True, exist_ok=True)
+    report = {"task": args.task, "config": str(source), "bench_config": config,
+              "seed": args.seed, "num_areas": args.num_areas, "ours": ours,
+              "reference": reference, "verdict": verdict,
+              "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
+                          "loadavg_at_end": os.getloadavg()}}
+    out_path = args.out / f"train_{args.task}.json"
+    out_path.write_text(json.dumps(report, indent=2))
+    print(f"wrote {out_path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
