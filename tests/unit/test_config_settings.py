@@ -198,7 +198,7 @@ def test_basic_and_ball3d_values():
     assert (hp.batch_size, hp.buffer_size, hp.beta, hp.lambd, hp.num_epoch) == (32, 256, 5e-3, 0.95, 3)
     assert (basic.network_settings.hidden_units, basic.network_settings.num_layers) == (20, 1)
     assert (basic.reward_signals["extrinsic"].gamma, basic.max_steps, basic.time_horizon) == (0.9, 20000, 3)
-    assert (basic.summary_freq, basic.checkpoint_interval, basic.keep_checkpoints) == (1000, 2000, 5)
+    assert (basic.summary_freq, basic.checkpoint_interval, basic.keep_checkpoints) == (2000, 2000, 5)
     ball = load_run_options(os.path.join(REPO, "configs", "ball3d.yaml")).behaviors["3DBall"]
     hp = ball.hyperparameters
     assert (hp.batch_size, hp.buffer_size, hp.beta, hp.lambd) == (64, 12000, 1e-3, 0.99)
