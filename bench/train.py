@@ -20,6 +20,8 @@ Reported per trainer:
   * wall_s            process start to exit (imports, env launch, training, final save/export)
   * agent_steps_per_s final summary step / wall_s (steps count agent-steps, as in ML-Agents)
   * steady_steps_per_s (last - first summary step) / (their event wall_time difference): no startup
+  * cpu_s, agent_steps_per_cpu_s  user+sys CPU of the trainer and its reaped children (the stub):
+                      less sensitive than wall time to other processes sharing the cores
   * mean reward (``Environment/Cumulative Reward``) at every summary step, side by side
 Then the speed ratios and whether our reward over the last 3 common summaries is no worse.
 Prints a markdown table; writes JSON to ``<out>/train_<task>.json``.
@@ -31,6 +33,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import socket
 import stat
 import subprocess
@@ -87,16 +90,24 @@ def write_bench_config(source: Path, target: Path, max_steps: int | None) -> dic
     return config
 
 
+def children_cpu_seconds() -> float:
+    """User + system CPU seconds of all waited-for descendants (trainer and the stub it reaped)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def run_trainer(command: list[str], cwd: Path, env: dict[str, str], timeout: float,
                 log_path: Path) -> dict:
     """Run one trainer process (output to log_path); returns exit code, wall seconds, output tail."""
+    cpu_before = children_cpu_seconds()
     started = time.perf_counter()
     with open(log_path, "w") as log:
         completed = subprocess.run(command, cwd=cwd, env=env, stdout=log, stderr=subprocess.STDOUT,
                                    timeout=timeout)
     wall = time.perf_counter() - started
+    cpu = children_cpu_seconds() - cpu_before
     output = log_path.read_text(errors="replace")
-    return {"returncode": completed.returncode, "wall_s": wall, "output_tail": output[-3000:],
+    return {"returncode": completed.returncode, "wall_s": wall, "cpu_s": cpu, "output_tail": output[-3000:],
             "onnx_export_failed": ONNXSCRIPT_FAILURE in output, "log": str(log_path)}
 
 
@@ -127,6 +138,7 @@ def summarize(label: str, run: dict, rewards: list[dict], run_dir: Path) -> dict
         steady = (rewards[-1]["step"] - rewards[0]["step"]) / span if span > 0 else None
     return {"trainer": label, **run, "final_step": final_step,
             "agent_steps_per_s": final_step / run["wall_s"] if run["wall_s"] > 0 else None,
+            "agent_steps_per_cpu_s": final_step / run["cpu_s"] if run["cpu_s"] > 0 else None,
             "steady_steps_per_s": steady, "timers_total_s": timers_total(run_dir),
             "rewards": rewards}
 
@@ -166,6 +178,7 @@ def compare(ours: dict, reference: dict) -> dict:
     speedup = ratio("agent_steps_per_s")
     reward_ok = ours_mean is not None and ref_mean is not None and ours_mean >= ref_mean
     return {"speedup_agent_steps_per_s": speedup, "speedup_steady": ratio("steady_steps_per_s"),
+            "speedup_per_cpu_s": ratio("agent_steps_per_cpu_s"),
             "compared_steps": last, "ours_last_mean_reward": ours_mean,
             "reference_last_mean_reward": ref_mean, "reward_no_worse": reward_ok,
             "target_met": bool(speedup and speedup >= TARGET_SPEEDUP and reward_ok)}
@@ -177,12 +190,14 @@ def fmt(value, spec: str = ".1f") -> str:
 
 def markdown(task: str, ours: dict, reference: dict, verdict: dict) -> str:
     lines = [f"### train benchmark: {task}", "",
-             "| trainer | exit | wall s | final step | agent-steps/s | steady steps/s | timers total s |",
-             "|---|---|---|---|---|---|---|"]
+             "| trainer | exit | wall s | CPU s | final step | agent-steps/s | steady steps/s "
+             "| agent-steps/CPU-s | timers total s |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for row in (ours, reference):
         lines.append(f"| {row['trainer']} | {row['returncode']} | {fmt(row['wall_s'])} | "
-                     f"{row['final_step']} | {fmt(row['agent_steps_per_s'])} | "
-                     f"{fmt(row['steady_steps_per_s'])} | {fmt(row['timers_total_s'])} |")
+                     f"{fmt(row['cpu_s'])} | {row['final_step']} | {fmt(row['agent_steps_per_s'])} | "
+                     f"{fmt(row['steady_steps_per_s'])} | {fmt(row['agent_steps_per_cpu_s'])} | "
+                     f"{fmt(row['timers_total_s'])} |")
     lines += ["", "| step | ours reward | reference reward |", "|---|---|---|"]
     ref_by_step = {r["step"]: r["value"] for r in reference["rewards"]}
     ours_by_step = {r["step"]: r["value"] for r in ours["rewards"]}
@@ -191,7 +206,8 @@ def markdown(task: str, ours: dict, reference: dict, verdict: dict) -> str:
                      f"{fmt(ref_by_step.get(step), '.3f')} |")
     lines += ["",
               f"speed ratio (agent-steps/s): {fmt(verdict['speedup_agent_steps_per_s'], '.2f')}x, "
-              f"steady-state: {fmt(verdict['speedup_steady'], '.2f')}x (target >= {TARGET_SPEEDUP:g}x)",
+              f"steady-state: {fmt(verdict['speedup_steady'], '.2f')}x, per CPU-second: "
+              f"{fmt(verdict['speedup_per_cpu_s'], '.2f')}x (target >= {TARGET_SPEEDUP:g}x)",
               f"mean reward over steps {verdict['compared_steps']}: ours "
               f"{fmt(verdict['ours_last_mean_reward'], '.3f')} vs reference "
               f"{fmt(verdict['reference_last_mean_reward'], '.3f')} -> no worse: "
