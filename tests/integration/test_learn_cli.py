@@ -86,6 +86,14 @@ def test_resume_continues_at_saved_step(tmp_path, basic_config, env_no_proxy):
     second = json.loads((tmp_path / "results/r/run_logs/training_status.json").read_text())
     assert second["Basic"]["final_checkpoint"]["steps"] > 1200
     assert min(c["steps"] for c in second["Basic"]["checkpoints"]) <= first_step + 300
+    # --initialize-from: a new run starts at step 0 from the other run's weights
+    r = learn([str(basic_config(max_steps=300, interval=300, name="init.yaml")), "--env", "stub:basic",
+               "--run-id", "r2", "--initialize-from", "r", "--results-dir", res, "--base-port", str(port)],
+              cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "results/r/Basic/checkpoint.pt for behavior Basic at step 0" in r.stdout
+    third = json.loads((tmp_path / "results/r2/run_logs/training_status.json").read_text())
+    assert 300 < third["Basic"]["final_checkpoint"]["steps"] < 400
 
 
 @pytest.mark.parametrize("case", ["malformed", "unknown_key", "wrong_type", "missing_env", "missing_yaml"])
