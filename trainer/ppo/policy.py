@@ -11,7 +11,9 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from trainer.ppo import fast_actor
 from trainer.ppo.distributions import (
+    EPSILON,
     categorical_entropy,
     categorical_log_prob,
     gaussian_entropy,
@@ -57,6 +59,9 @@ class Policy:
             self.actor = Actor(behavior_spec.observation_specs, self.action_spec, hyperparams).to(self.device)
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(seed + 1)
+        # vector-only actors on the CPU decide in numpy (see fast_actor for why)
+        use_numpy = self.device.type == "cpu" and fast_actor.supports(self.actor)
+        self._numpy_actor = fast_actor.NumpyActor(self.actor) if use_numpy else None
 
     def _to_tensors(self, obs: Sequence[np.ndarray]) -> list[torch.Tensor]:
         return [torch.as_tensor(np.asarray(o, dtype=np.float32), device=self.device) for o in obs]
@@ -69,6 +74,8 @@ class Policy:
         True = masked, or None. ``deterministic`` (or hyperparams.deterministic) uses mean / argmax.
         """
         deterministic = deterministic or self.hyperparams.deterministic
+        if self._numpy_actor is not None:
+            return self._act_numpy(obs, action_mask, deterministic)
         allowed = allowed_from_mask(action_mask)
         with torch.inference_mode():
             tensors = self._to_tensors(obs)
@@ -108,6 +115,51 @@ class Policy:
             discrete=discrete_np,
             log_probs=log_probs.cpu().numpy(),
             entropy=entropy.cpu().numpy(),
+        )
+
+    def _act_numpy(self, obs: Sequence[np.ndarray], action_mask: np.ndarray | None,
+                   deterministic: bool) -> PolicyOutput:
+        """``act`` in numpy: same distributions, noise drawn from the same torch generator."""
+        allowed = None if action_mask is None else np.logical_not(action_mask).astype(np.float32)
+        mu, logits = self._numpy_actor.heads(list(obs), allowed)
+        n = len(obs[0])
+        log_parts: list[np.ndarray] = []
+        entropy = np.zeros(n, dtype=np.float32)
+        raw = np.zeros((n, 0), dtype=np.float32)
+        if mu is not None:
+            sigma = np.exp(self._numpy_actor.log_sigma)  # [1, c]
+            if deterministic:
+                raw = mu
+            else:
+                noise = torch.randn(mu.shape, generator=self.generator).numpy()
+                raw = mu + noise * sigma
+            log_parts.append(-((raw - mu) ** 2) / (2 * sigma**2 + EPSILON) - np.log(sigma + EPSILON)
+                             - 0.5 * np.log(2 * np.pi))
+            entropy = entropy + np.mean(0.5 * np.log(2 * np.pi * np.e * sigma**2 + EPSILON))
+        chosen = []
+        rows = np.arange(n)
+        for branch_logits in logits:
+            z = np.exp(branch_logits - branch_logits.max(axis=1, keepdims=True))
+            probs = z / z.sum(axis=1, keepdims=True)
+            if deterministic:
+                action = probs.argmax(axis=1)
+            else:
+                u = torch.rand(n, generator=self.generator).numpy()[:, None]
+                action = (np.cumsum(probs, axis=1) <= u).sum(axis=1)
+                # rounding can push u past the last cumulative sum: take the last allowed option
+                last_allowed = probs.shape[1] - 1 - np.argmax(probs[:, ::-1] > 0, axis=1)
+                action = np.minimum(action, last_allowed)
+            chosen.append(action)
+            log_parts.append(np.log(probs[rows, action] + EPSILON)[:, None])
+            entropy = entropy - np.sum(probs * np.log(probs + EPSILON), axis=1)
+        discrete = (np.stack(chosen, axis=1) if chosen else np.zeros((n, 0))).astype(np.int32)
+        raw = raw.astype(np.float32)
+        return PolicyOutput(
+            env_actions=ActionTuple(np.clip(raw, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP, discrete),
+            continuous_raw=raw,
+            discrete=discrete,
+            log_probs=np.concatenate(log_parts, axis=1).astype(np.float32),
+            entropy=entropy.astype(np.float32),
         )
 
     def evaluate(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None,

@@ -1,0 +1,59 @@
+"""The numpy actor used for deciding must equal the torch actor, and follow every weight change."""
+import numpy as np
+import torch
+
+from trainer.ppo.fast_actor import NumpyActor, supports
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.networks import Actor
+from trainer.protocol.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
+
+HP = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
+
+
+def vec(n):
+    return ObservationSpec((n,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "v")
+
+
+def torch_heads(actor, obs, allowed):
+    with torch.no_grad():
+        mu, logits = actor.heads([torch.from_numpy(o) for o in obs],
+                                 None if allowed is None else torch.from_numpy(allowed))
+    return (None if mu is None else mu.numpy()), [lg.numpy() for lg in logits]
+
+
+def test_hybrid_heads_match_torch_and_follow_updates():
+    torch.manual_seed(0)
+    actor = Actor((vec(3), vec(5)), ActionSpec(2, (3, 2)), HP)
+    fast = NumpyActor(actor)
+    rng = np.random.default_rng(1)
+    obs = [rng.standard_normal((7, 3)).astype(np.float32) * 4, rng.standard_normal((7, 5)).astype(np.float32)]
+    allowed = np.ones((7, 5), np.float32)
+    allowed[:, 1] = 0.0
+    for round_ in range(3):
+        mu, logits = fast.heads(obs, allowed)
+        t_mu, t_logits = torch_heads(actor, obs, allowed)
+        np.testing.assert_allclose(mu, t_mu, rtol=1e-5, atol=1e-6)
+        for a, b in zip(logits, t_logits):
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-4)
+        assert np.all(logits[0][:, 1] < -1e7)  # the masked option
+        # change everything the fast copy caches: normaliser statistics and weights
+        actor.update_normalization([torch.from_numpy(o * (round_ + 2)) for o in obs])
+        with torch.no_grad():
+            for p in actor.parameters():
+                if p.requires_grad:
+                    p.add_(0.05)
+
+
+def test_load_state_dict_is_seen_and_visual_actors_are_not_supported():
+    torch.manual_seed(0)
+    a, b = Actor((vec(4),), ActionSpec(1, ()), HP), Actor((vec(4),), ActionSpec(1, ()), HP)
+    fast = NumpyActor(a)
+    obs = [np.ones((2, 4), np.float32)]
+    before, _ = fast.heads(obs, None)
+    a.load_state_dict(b.state_dict())
+    after, _ = fast.heads(obs, None)
+    np.testing.assert_allclose(after, torch_heads(b, obs, None)[0], rtol=1e-5, atol=1e-6)
+    assert not np.allclose(before, after)
+    visual = ObservationSpec((3, 36, 36), (DimensionProperty.NONE, DimensionProperty.TRANSLATIONAL_EQUIVARIANCE,
+                                           DimensionProperty.TRANSLATIONAL_EQUIVARIANCE), ObservationType.DEFAULT, "cam")
+    assert not supports(Actor((visual, vec(2)), ActionSpec(1, ()), HP))
