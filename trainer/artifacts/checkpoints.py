@@ -6,11 +6,11 @@ A checkpoint holds only tensors, numbers, strings, dicts and lists, so it loads 
 from __future__ import annotations
 
 import os
-import tempfile
 from typing import Any
 
 import torch
 
+from trainer.artifacts.atomic import atomic_write
 from trainer.errors import UserError
 
 _RECOVERY_HINT = "use --force to start over, or a different --run-id"
@@ -21,34 +21,9 @@ def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> None
 
     A failure at any point leaves an existing file at ``path`` untouched.
     """
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    handle, tmp_path = tempfile.mkstemp(prefix=".checkpoint-", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(handle, "wb") as tmp:
-            torch.save(state, tmp)
-            tmp.flush()
-            os.fsync(tmp.fileno())
-        os.replace(tmp_path, path)
-    except BaseException:
-        if os.path.exists(tmp_path):
-            os.remove(tmp_path)
-        raise
-    _fsync_folder(folder)
+    atomic_write(path, lambda f: torch.save(state, f))
 
 
-def _fsync_folder(folder: str) -> None:
-    """Make the rename durable where the platform allows opening a directory."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:

@@ -11,12 +11,12 @@ from __future__ import annotations
 import copy
 import io
 import os
-import tempfile
 import warnings
 
 import torch
 from torch import nn
 
+from trainer.artifacts.atomic import atomic_write
 from trainer.ppo.networks import Actor
 from trainer.ppo.policy import CONTINUOUS_CLIP, Policy
 
@@ -95,16 +95,4 @@ def export_to_bytes(policy: Policy) -> bytes:
 def export_policy(policy: Policy, path: str | os.PathLike[str]) -> None:
     """Write ``path`` (.onnx) atomically: a temp file in the same folder, fsync, then os.replace."""
     payload = export_to_bytes(policy)
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    handle, tmp_path = tempfile.mkstemp(prefix=".onnx-", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(handle, "wb") as tmp:
-            tmp.write(payload)
-            tmp.flush()
-            os.fsync(tmp.fileno())
-        os.replace(tmp_path, path)
-    except BaseException:
-        if os.path.exists(tmp_path):
-            os.remove(tmp_path)
-        raise
+    atomic_write(path, lambda f: f.write(payload))

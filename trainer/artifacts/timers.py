@@ -19,10 +19,11 @@ import json
 import math
 import os
 import sys
-import tempfile
 import time
 from importlib import metadata as importlib_metadata
 from typing import Any, Callable, TypeVar
+
+from trainer.artifacts.atomic import atomic_write
 
 __all__ = ["TimerNode", "GaugeNode", "TimerTree", "TIMER_FORMAT_VERSION", "package_version"]
 
@@ -251,16 +252,8 @@ class TimerTree:
 
 def write_json_atomic(path: str | os.PathLike[str], data: Any) -> None:
     """Dump ``data`` as JSON (indent 4) to a temp file in the target folder, then rename."""
-    path = os.fspath(path)
-    folder = os.path.dirname(path) or "."
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp_path = tempfile.mkstemp(prefix=".tmp-", suffix=".json", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=4)
-            f.write("\n")
-        os.replace(tmp_path, path)
-    except BaseException:
-        if os.path.exists(tmp_path):
-            os.remove(tmp_path)
-        raise
+    def dump(f) -> None:
+        json.dump(data, f, indent=4)
+        f.write("\n")
+
+    atomic_write(path, dump, binary=False)

@@ -12,6 +12,7 @@ from typing import Any, Collection, Mapping
 
 import yaml
 
+from trainer.artifacts.atomic import atomic_write
 from trainer.config.env_params import structure_environment_parameters
 from trainer.config.legacy import convert_if_legacy
 from trainer.config.settings import (
@@ -217,6 +218,5 @@ def write_run_options(options: RunOptions, output_dir: str | None = None) -> str
     output_dir = output_dir or options.checkpoint_settings.write_path
     os.makedirs(output_dir, exist_ok=True)
     path = os.path.join(output_dir, CONFIGURATION_FILE_NAME)
-    with open(path, "w", encoding="utf-8") as stream:
-        yaml.safe_dump(options.as_dict(), stream, sort_keys=False)
+    atomic_write(path, lambda stream: yaml.safe_dump(options.as_dict(), stream, sort_keys=False), binary=False)
     return path
