@@ -141,7 +141,7 @@ class BehaviorRunner:
     def add_trajectory(self, traj: Trajectory, status: TrainingStatus) -> dict[str, float]:
         """Checkpoint if this trajectory crosses the next interval (named with the step before it),
         then hand it to PPO."""
-        if not self.training:
+        if self.done:  # inference, or past max_steps while other behaviors still train
             return {}
         if self.trainer.step + len(traj) >= self.next_checkpoint:
             self.save_checkpoint(status)

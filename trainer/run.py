@@ -182,7 +182,7 @@ class RunState:
             for key, value in stats.items():
                 self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
         for runner in self.runners.values():
-            if runner.training and runner.trainer.ready_to_update():
+            if not runner.done and runner.trainer.ready_to_update():
                 with self.timers.scope("update"):
                     stats = runner.trainer.update()
                 for key, value in stats.items():

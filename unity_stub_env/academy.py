@@ -34,13 +34,15 @@ class ActionCountError(RuntimeError):
 
 
 class Academy:
-    def __init__(self, task: Task, decision_period: int | None = None) -> None:
+    def __init__(self, task: Task, decision_period: int | None = None,
+                 episode_counter: EpisodeIdCounter | None = None) -> None:
         self.task = task
         self.decision_period = int(decision_period or task.decision_period)
         if self.decision_period < 1:
             raise ValueError(f"decision_period must be >= 1, got {self.decision_period}")
         self.behavior_key = f"{task.behavior_name}?team=0"
-        self.episode_counter = EpisodeIdCounter()
+        # one counter per process (Unity's is static): pass the same one to every academy
+        self.episode_counter = episode_counter or EpisodeIdCounter()
         n = task.num_agents
         self.episode_ids = np.zeros(n, dtype=np.int64)
         self.pending_reward = np.zeros(n, dtype=np.float32)

@@ -17,7 +17,7 @@ import signal
 import sys
 
 from unity_stub_env.academy import Academy, ActionCountError
-from unity_stub_env.agents import build_brain_parameters
+from unity_stub_env.agents import EpisodeIdCounter, build_brain_parameters
 from unity_stub_env.communicator import RpcCommunicator, SessionEnd, SideChannelState, encode_stats
 from unity_stub_env.tasks import TASKS, EnvironmentParameters, make_task
 
@@ -31,7 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="unity-stub-env", allow_abbrev=False,
         description="A headless simulator that trains against any ML-Agents (comm API 1.5.0) trainer.")
-    parser.add_argument("--task", help=f"task to simulate: {', '.join(sorted(TASKS))}")
+    parser.add_argument("--task", action="append",
+                        help=f"task to simulate: {', '.join(sorted(TASKS))}; repeat it (or separate "
+                             "names with commas) for a scene with several behaviors")
     parser.add_argument("--mlagents-port", type=int, default=None,
                         help="port of the trainer's gRPC server (a Unity player does not train without it)")
     parser.add_argument("--num-areas", type=int, default=None, help="override the trainer's num_areas")
@@ -73,9 +75,15 @@ def main(argv: list[str] | None = None) -> int:
         for task_class in TASKS.values():
             print(task_class.describe())
         return 0
-    if args.task not in TASKS:
-        print(f"unity-stub-env: unknown or missing --task {args.task!r}; known tasks: "
-              f"{', '.join(sorted(TASKS))} (see --list).", file=sys.stderr)
+    args.tasks = [name for value in (args.task or []) for name in value.split(",") if name]
+    unknown_tasks = [name for name in args.tasks if name not in TASKS]
+    if not args.tasks or unknown_tasks:
+        print(f"unity-stub-env: unknown or missing --task {', '.join(unknown_tasks) or repr(None)}; "
+              f"known tasks: {', '.join(sorted(TASKS))} (see --list).", file=sys.stderr)
+        return 2
+    if len(set(args.tasks)) != len(args.tasks):
+        print(f"unity-stub-env: each --task may appear once (got {', '.join(args.tasks)}): two copies "
+              "would share one behavior name; use --num-areas for more agents.", file=sys.stderr)
         return 2
     if args.mlagents_port is None:
         print("unity-stub-env: no --mlagents-port given. A Unity player started without it does not "
@@ -117,11 +125,15 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
     if first_input.command == COMMAND_QUIT:
         communicator.close(send_closing=False)
         raise SessionEnd("The trainer sent QUIT.", 0)
-    task = make_task(args.task, num_areas=num_areas, seed=seed, env_params=env_params)
-    academy = Academy(task, args.decision_period)  # construction is the first RESET
-    logger.info("Task %s: behavior %s, %d agents (%d areas), seed %d, decision period %d",
-                task.name, academy.behavior_key, task.num_agents, num_areas, seed, academy.decision_period)
-    brain_parameters = build_brain_parameters(academy.behavior_key, task.action_spec)
+    counter = EpisodeIdCounter()  # process-wide, like Unity's
+    academies = []
+    for index, name in enumerate(args.tasks):  # one behavior per task, like a scene with several
+        task = make_task(name, num_areas=num_areas, seed=seed + index, env_params=env_params)
+        academy = Academy(task, args.decision_period, counter)  # construction is the first RESET
+        academies.append((academy, build_brain_parameters(academy.behavior_key, task.action_spec)))
+        logger.info("Task %s: behavior %s, %d agents (%d areas), seed %d, decision period %d",
+                    task.name, academy.behavior_key, task.num_agents, num_areas, seed + index,
+                    academy.decision_period)
     exchanges = 0
     while True:
         if args.crash_after is not None and exchanges >= args.crash_after:
@@ -129,21 +141,22 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
             logging.shutdown()
             os._exit(3)
         exchanges += 1
-        infos = academy.collect_infos()
-        rl_input = communicator.exchange(academy.behavior_key, infos, brain_parameters,
-                                         encode_stats(academy.take_stats()))
+        batches = [(academy.behavior_key, academy.collect_infos(), brain) for academy, brain in academies]
+        stats = [stat for academy, _ in academies for stat in academy.take_stats()]
+        rl_input = communicator.exchange_many(batches, encode_stats(stats))
         side_channels.apply(rl_input.side_channel)
         if rl_input.command == COMMAND_QUIT:
             communicator.close(send_closing=False)
             raise SessionEnd("The trainer sent QUIT.", 0)
         if rl_input.command == COMMAND_RESET:
             logger.info("Environment reset by the trainer")
-            academy.environment_reset()
+            for academy, _ in academies:
+                academy.environment_reset()
             continue
-        actions = rl_input.agent_actions.get(academy.behavior_key)
-        academy.apply_actions(list(actions.value) if actions is not None else [])
-        academy.advance()
-
+        for academy, _ in academies:
+            actions = rl_input.agent_actions.get(academy.behavior_key)
+            academy.apply_actions(list(actions.value) if actions is not None else [])
+            academy.advance()
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -155,20 +155,25 @@ class RpcCommunicator:
 
     # Regular exchanges -----------------------------------------------------------------------
     def exchange(self, behavior_key: str, infos: list, brain_parameters, side_channel: bytes):
-        """Send one step's agent infos; returns the trainer's ``rl_input``.
+        """Send one step's agent infos of one behavior; returns the trainer's ``rl_input``."""
+        return self.exchange_many([(behavior_key, infos, brain_parameters)], side_channel)
 
-        ``brain_parameters`` is attached only the first time ``behavior_key`` is sent with at
-        least one agent info. Raises SessionEnd on a non-200 answer, QUIT or a lost trainer.
+    def exchange_many(self, batches: list, side_channel: bytes):
+        """Send one step's agent infos of every behavior, ``[(behavior_key, infos, brain_parameters)]``.
+
+        ``brain_parameters`` is attached only the first time a behavior is sent with at least one
+        agent info (as Unity does). Raises SessionEnd on a non-200 answer, QUIT or a lost trainer.
         """
         output = unity_output_pb2.UnityOutputProto()
-        output.rl_output.agentInfos[behavior_key].value.extend(infos)
+        first_time = []
+        for behavior_key, infos, brain_parameters in batches:
+            output.rl_output.agentInfos[behavior_key].value.extend(infos)
+            if behavior_key not in self._sent_brain_keys and len(infos) > 0:
+                output.rl_initialization_output.brain_parameters.append(brain_parameters)
+                first_time.append(behavior_key)
         output.rl_output.side_channel = side_channel
-        first_time = behavior_key not in self._sent_brain_keys and len(infos) > 0
-        if first_time:
-            output.rl_initialization_output.brain_parameters.append(brain_parameters)
         answer = self._exchange_raw(_wrap(output))
-        if first_time:
-            self._sent_brain_keys.add(behavior_key)
+        self._sent_brain_keys.update(first_time)
         return answer.unity_input.rl_input
 
     def _exchange_raw(self, message: unity_message_pb2.UnityMessageProto) -> unity_message_pb2.UnityMessageProto:

@@ -115,3 +115,46 @@ def test_inference_runs_the_saved_policy_without_training(tmp_path, basic_config
     after = json.loads(status_file.read_text())["Basic"]
     assert after["checkpoints"] == before["checkpoints"]  # inference writes no new checkpoint
     assert f"at step {before['final_checkpoint']['steps']}" in "".join(seen)
+
+
+def test_two_behaviors_in_one_run_each_train_and_stop_at_their_own_max_steps(tmp_path, env_no_proxy):
+    """One simulator with two behaviors (stub:basic,ball3d, like a Unity scene with two Behavior
+    Parameters): each gets its own trainer, folder, TensorBoard run, checkpoints and ONNX, and one
+    that reaches max_steps stops learning while the other goes on."""
+    cfg = tmp_path / "two.yaml"
+    cfg.write_text(textwrap.dedent("""
+        behaviors:
+          Basic:
+            trainer_type: ppo
+            hyperparameters: {batch_size: 32, buffer_size: 256}
+            network_settings: {hidden_units: 20, num_layers: 1}
+            max_steps: 600
+            time_horizon: 3
+            summary_freq: 300
+            checkpoint_interval: 300
+          3DBall:
+            trainer_type: ppo
+            hyperparameters: {batch_size: 64, buffer_size: 1200}
+            network_settings: {normalize: true, hidden_units: 32}
+            max_steps: 2400
+            time_horizon: 100
+            summary_freq: 1200
+            checkpoint_interval: 1200
+        """))
+    r = learn([str(cfg), "--env", "stub:basic,ball3d", "--run-id", "two", "--seed", "2",
+               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
+              cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    run = tmp_path / "results" / "two"
+    assert "Connected new brain: Basic?team=0" in r.stdout and "Connected new brain: 3DBall?team=0" in r.stdout
+    status = json.loads((run / "run_logs/training_status.json").read_text())
+    for brain, max_steps in (("Basic", 600), ("3DBall", 2400)):
+        assert (run / f"{brain}.onnx").is_file() and (run / brain / "checkpoint.pt").is_file()
+        final = status[brain]["final_checkpoint"]["steps"]
+        # stops within one decision batch of max_steps (24 ball3d agents per decision at most)
+        assert max_steps < final <= max_steps + 24, (brain, final)
+        tags = tb_scalars(run / brain)
+        assert "Losses/Policy Loss" in tags and "Environment/Cumulative Reward" in tags
+    # 3DBall finished first but was not updated or checkpointed again while Basic trained on
+    assert sorted(c["steps"] for c in status["3DBall"]["checkpoints"])[-1] == status["3DBall"]["final_checkpoint"]["steps"]
+    assert len(status["3DBall"]["checkpoints"]) == 3

@@ -102,6 +102,10 @@ def test_cli_list_and_usage_errors(capsys):
     assert "--mlagents-port" in capsys.readouterr().err
     assert main(["--task", "nope", "--mlagents-port", "5005"]) == 2
     assert "ball3d, basic" in capsys.readouterr().err
+    assert main(["--task", "basic,nope", "--mlagents-port", "5005"]) == 2  # one bad name of several
+    assert "nope" in capsys.readouterr().err
+    assert main(["--task", "basic", "--task", "basic", "--mlagents-port", "5005"]) == 2
+    assert "each --task may appear once" in capsys.readouterr().err
 
 
 def test_no_trainer_exits_1_naming_the_address_and_logs_to_the_log_file(tmp_path):
