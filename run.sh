@@ -10,8 +10,8 @@ task="${TASK:-ball3d}"
 args=("$config" --env "stub:$task" --run-id "$run_id" --no-graphics)
 # Re-running continues the earlier run instead of refusing to overwrite it.
 if [ -d "results/$run_id" ] && [[ " $* " != *" --force "* ]]; then args+=(--resume); fi
-.venv/bin/mlagents-like-learn "${args[@]}" "$@"
-status=$?
+status=0
+.venv/bin/mlagents-like-learn "${args[@]}" "$@" || status=$?
 echo
 echo "Results:     $(pwd)/results/$run_id   (final model: results/$run_id/*.onnx)"
 echo "TensorBoard: .venv/bin/tensorboard --logdir $(pwd)/results   then open http://localhost:6006"

@@ -28,7 +28,9 @@ def _install_signal_handlers() -> None:
     def handler(signum, _frame):
         raise _GracefulStop(signal.Signals(signum).name)
 
-    for name in ("SIGTERM", "SIGQUIT", "SIGUSR1"):
+    # SIGINT too: a trainer started from a script in the background inherits SIGINT as ignored,
+    # and would then not stop on kill -INT
+    for name in ("SIGINT", "SIGTERM", "SIGQUIT", "SIGUSR1"):
         sig = getattr(signal, name, None)
         if sig is not None:
             signal.signal(sig, handler)
