@@ -144,9 +144,14 @@ class PPOTrainer:
         values = self.critic(obs)
         names = list(values)
         policy_term = policy_loss(batch["advantages"], log_probs, batch["log_probs"], epsilon)
-        value_term = value_loss(
-            values, {n: batch[f"values:{n}"] for n in names}, {n: batch[f"returns:{n}"] for n in names}, epsilon
-        )
+        # The reference's trust region is anchored at the *returns*, not at the old value estimates:
+        # in mlagents 1.1.0 RewardSignalUtil.value_estimates_key(name) is the returns key, so
+        # _process_trajectory's value estimates are overwritten by the returns and the update reads
+        # the returns as "old values". max((R-V)^2, clip(V-R, +-eps)^2) is then (R-V)^2: the critic
+        # is not held to +-epsilon per update. We reproduce that (measured: anchoring at the real
+        # old values learned ball3d measurably slower than mlagents-learn on the same stub).
+        returns = {n: batch[f"returns:{n}"] for n in names}
+        value_term = value_loss(values, returns, returns, epsilon)
         loss = ppo_loss(policy_term, value_term, entropy, beta)
         return loss, {
             "Losses/Policy Loss": abs(policy_term.item()),
