@@ -41,7 +41,8 @@ def test_ball3d_learns_to_hold_the_ball_longer(tmp_path, env_no_proxy):
     """configs/ball3d.yaml (ML-Agents' 3DBall hyperparameters) cut to 48,000 steps, 2 areas
     (24 agents), seed 3. A policy that does nothing holds the ball ~13 decisions (mean return
     ~1.35: +0.1 per decision, -1 at the fall); after 4 PPO updates the documented threshold is a
-    mean return >= 2.0 at the last summary, and >= 1.4 x the first summary's."""
+    mean return >= 2.2 at the last summary, and >= 1.5 x the first summary's (measured: 1.48 ->
+    2.41; the reference mlagents-learn reaches 2.28-2.49 at 48k on this stub, seeds 1-3)."""
     cfg = tmp_path / "ball3d.yaml"
     text = (ROOT / "configs" / "ball3d.yaml").read_text()
     cfg.write_text(text.replace("max_steps: 500000", "max_steps: 48000")
@@ -54,4 +55,4 @@ def test_ball3d_learns_to_hold_the_ball_longer(tmp_path, env_no_proxy):
     assert curve[-1][0] == 48000
     first, last = curve[0][1], curve[-1][1]
     assert first < 1.6, curve
-    assert last >= 2.0 and last >= 1.4 * first, curve
+    assert last >= 2.2 and last >= 1.5 * first, curve
