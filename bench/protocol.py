@@ -36,6 +36,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from trainer.protocol.server import UnityEndpoint  # noqa: E402
+from unity_stub_env.launcher import write_player_launcher
 from unity_stub_env import make_task  # noqa: E402
 
 INTEROP_PYTHON = REPO / ".venv-interop" / "bin" / "python"
@@ -101,9 +102,7 @@ def bench_mlagents_envs(task: str, num_areas: int, warmup: int, exchanges: int) 
     if not INTEROP_PYTHON.exists():
         return None
     with tempfile.TemporaryDirectory() as folder:
-        exe = Path(folder) / f"Stub{task.title()}.x86_64"
-        exe.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m unity_stub_env.cli --task {task} "$@"\n')
-        exe.chmod(0o755)
+        exe = write_player_launcher(folder, [task])
         options = {"file_name": str(exe.with_suffix("")), "base_port": free_port(),
                    "num_areas": num_areas, "warmup": warmup, "exchanges": exchanges}
         env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}

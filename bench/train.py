@@ -35,7 +35,6 @@ import os
 import platform
 import resource
 import socket
-import stat
 import subprocess
 import sys
 import tempfile
@@ -43,6 +42,8 @@ import time
 from pathlib import Path
 
 import yaml
+
+from unity_stub_env.launcher import write_player_launcher
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 REPO = Path(__file__).resolve().parents[1]
@@ -71,12 +72,8 @@ def free_port() -> int:
 
 
 def stub_launcher(folder: Path, task: str) -> Path:
-    """``folder/Stub<Task>.x86_64``: a Unity-build-like shell launcher of the stub (this Python)."""
-    name = "Stub" + "".join(ch for ch in task.title() if ch.isalnum())
-    path = folder / f"{name}.x86_64"
-    path.write_text(f'#!/bin/sh\nexec "{OUR_PYTHON}" -m unity_stub_env.cli --task {task} "$@"\n')
-    path.chmod(path.stat().st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)
-    return path
+    """``folder/Stub<Task>.x86_64``: a Unity-build-like shell launcher of the stub (our venv's Python)."""
+    return write_player_launcher(folder, [task], python=str(OUR_PYTHON))
 
 
 def write_bench_config(source: Path, target: Path, max_steps: int | None) -> dict:

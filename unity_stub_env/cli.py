@@ -18,6 +18,7 @@ import sys
 
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter, build_brain_parameters
+from unity_stub_env.launcher import write_player_launcher
 from unity_stub_env.communicator import RpcCommunicator, SessionEnd, SideChannelState, encode_stats
 from unity_stub_env.tasks import TASKS, EnvironmentParameters, make_task
 
@@ -43,6 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--connect-timeout", type=float, default=60.0,
                         help="seconds to keep retrying the connection to the trainer (default 60)")
     parser.add_argument("--list", action="store_true", help="list the tasks with their specs and exit")
+    parser.add_argument("--write-launcher", metavar="DIR", default=None,
+                        help="write DIR/Stub<Task>.x86_64, a Unity-build-like launcher of --task that "
+                             "mlagents-learn --env DIR/Stub<Task> (or UnityEnvironment) can start, and exit")
     parser.add_argument("--crash-after", type=int, default=None, metavar="N",
                         help="fault injection for tests: exit with code 3 after N exchanges, "
                              "without closing the connection (like a crashed player)")
@@ -85,6 +89,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unity-stub-env: each --task may appear once (got {', '.join(args.tasks)}): two copies "
               "would share one behavior name; use --num-areas for more agents.", file=sys.stderr)
         return 2
+    if args.write_launcher is not None:
+        path = write_player_launcher(args.write_launcher, args.tasks)
+        print(f"{path}  (use --env {path.with_suffix('')})")
+        return 0
     if args.mlagents_port is None:
         print("unity-stub-env: no --mlagents-port given. A Unity player started without it does not "
               "train; pass the trainer's port, e.g. --mlagents-port 5005.", file=sys.stderr)

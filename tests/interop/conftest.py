@@ -14,12 +14,13 @@ from __future__ import annotations
 import json
 import os
 import socket
-import stat
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from unity_stub_env.launcher import write_player_launcher
 
 REPO = Path(__file__).resolve().parents[2]
 INTEROP_VENV = REPO / ".venv-interop"
@@ -42,17 +43,9 @@ def interop_python() -> Path:
     return INTEROP_PYTHON
 
 
-def executable_name(task: str) -> str:
-    """``basic`` -> ``StubBasic``, ``ball3d`` -> ``StubBall3D`` (Unity build names are CamelCase)."""
-    return "Stub" + "".join(ch for ch in task.title() if ch.isalnum())
-
-
 def write_stub_executable(folder: Path, task: str) -> Path:
     """``folder/Stub<Task>.x86_64``: a shell launcher that runs the stub with this Python."""
-    path = folder / f"{executable_name(task)}.x86_64"
-    path.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m unity_stub_env.cli --task {task} "$@"\n')
-    path.chmod(path.stat().st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)
-    return path
+    return write_player_launcher(folder, [task])
 
 
 @pytest.fixture(scope="session")

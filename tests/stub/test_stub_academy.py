@@ -123,3 +123,15 @@ def test_no_trainer_exits_1_naming_the_address_and_logs_to_the_log_file(tmp_path
     assert f"localhost:{port}" in done.stderr
     text = log.read_text()
     assert f"localhost:{port}" in text and "Ignoring unknown flags: -screen-width 84" in text
+
+
+def test_write_launcher_makes_a_unity_build_like_executable(tmp_path, capsys):
+    import os
+
+    assert main(["--task", "basic,ball3d", "--write-launcher", str(tmp_path)]) == 0
+    exe = tmp_path / "StubBasicBall3D.x86_64"
+    assert os.access(exe, os.X_OK)
+    text = exe.read_text()
+    assert text.startswith("#!/bin/sh\nexec ") and "-m unity_stub_env.cli --task basic,ball3d" in text
+    assert text.rstrip().endswith('"$@"')  # passes on the flags the launching tool adds
+    assert f"--env {tmp_path / 'StubBasicBall3D'}" in capsys.readouterr().out

@@ -1,0 +1,30 @@
+"""Make the stub look like a built Unity player on disk, so any tool that launches Unity builds
+(mlagents-learn, mlagents_envs.UnityEnvironment, our own --env) can start it.
+
+``write_player_launcher(folder, ["ball3d"])`` writes ``folder/StubBall3D.x86_64``: a ``#!/bin/sh``
+script that execs this Python with ``-m unity_stub_env.cli --task ball3d`` and passes on every
+argument the launching tool adds (``--mlagents-port``, ``-logFile``, ``-nographics`` ...).
+Point the tool at ``folder/StubBall3D`` (without the suffix), as at a Unity build.
+"""
+from __future__ import annotations
+
+import shlex
+import stat
+import sys
+from pathlib import Path
+
+
+def player_name(tasks: list[str]) -> str:
+    """``["basic"]`` -> ``StubBasic``, ``["ball3d"]`` -> ``StubBall3D`` (Unity builds are CamelCase)."""
+    return "Stub" + "".join("".join(ch for ch in task.title() if ch.isalnum()) for task in tasks)
+
+
+def write_player_launcher(folder: str | Path, tasks: list[str], python: str | None = None) -> Path:
+    """Write ``folder/<player_name>.x86_64`` (executable) and return its path."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{player_name(tasks)}.x86_64"
+    command = [python or sys.executable, "-m", "unity_stub_env.cli", "--task", ",".join(tasks)]
+    path.write_text("#!/bin/sh\nexec " + " ".join(shlex.quote(part) for part in command) + ' "$@"\n')
+    path.chmod(path.stat().st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)
+    return path
