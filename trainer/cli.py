@@ -47,17 +47,24 @@ def setup_logging(debug: bool) -> None:
 
 
 def version_lines() -> list[str]:
-    import numpy
-    import torch
+    # installed versions from package metadata: importing torch here would delay launching the
+    # simulators by the whole torch import
+    from importlib.metadata import PackageNotFoundError, version
 
     from trainer import __version__
+
+    def installed(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return "not installed"
 
     return [
         "Version information:",
         f"  mlagents-like: {__version__},",
         "  Communicator API: 1.5.0,",
-        f"  PyTorch: {torch.__version__},",
-        f"  NumPy: {numpy.__version__},",
+        f"  PyTorch: {installed('torch')},",
+        f"  NumPy: {installed('numpy')},",
         f"  Python: {platform.python_version()}",
     ]
 

@@ -15,6 +15,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,7 +24,6 @@ from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
 from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
-from trainer.behavior import BehaviorRunner
 from trainer.config.env_params import ConstantSampler
 from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
@@ -33,6 +33,9 @@ from trainer.errors import UnityCommunicatorStoppedError, UserError
 from trainer.protocol import side_channels as sc
 from trainer.protocol.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer.rollout import AgentTracker, concat_masks
+
+if TYPE_CHECKING:  # torch is imported only once the simulators are launched (see run_training)
+    from trainer.behavior import BehaviorRunner
 
 logger = logging.getLogger("mlagents_like")
 
@@ -98,6 +101,8 @@ class RunState:
         runner = self.runners.get(brain)
         if runner is not None:
             return runner
+        from trainer.behavior import BehaviorRunner
+
         opts = self.options
         logger.info("Connected new brain: %s", behavior_name)
         settings = opts.behavior_settings(brain)
@@ -264,7 +269,6 @@ def configure_torch_threads() -> None:
 
 def run_training(options) -> int:
     """Train (or run inference) as configured. Returns the process exit code."""
-    configure_torch_threads()
     run_dir = prepare_run_dir(options)
     ck = options.checkpoint_settings
     env = options.env_settings
@@ -295,7 +299,11 @@ def run_training(options) -> int:
     for line in params.describe():
         logger.info(line)
     try:
-        pool.start()
+        pool.launch()
+        # while the simulators boot: import torch and the networks (seconds, on a small machine)
+        configure_torch_threads()
+        import trainer.behavior  # noqa: F401
+        pool.connect()
         with timers.scope("env.reset"):
             results = pool.reset(state.initial_side_channel())
         while True:

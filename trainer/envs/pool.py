@@ -61,6 +61,11 @@ class _Worker:
         self.endpoint: UnityEndpoint | None = None
 
     def connect(self) -> None:
+        self.launch()
+        self.handshake()
+
+    def launch(self) -> None:
+        """Listen on the port, then start the simulator (it boots while the trainer does other work)."""
         s = self.settings
         if self.env_path:
             cmd = build_launch_command(
@@ -78,6 +83,9 @@ class _Worker:
         else:
             logger.info("Listening on port %d. Start training by pressing the Play button in the Unity Editor.",
                         self.port)
+
+    def handshake(self) -> None:
+        s = self.settings
         init = self.endpoint.handshake(s.seed + self.worker_id, s.num_areas)
         logger.info("Connected to Unity environment with package version %s and communication version %s",
                     init.package_version, init.communication_version)
@@ -116,9 +124,24 @@ class EnvPool:
         return specs
 
     def start(self) -> None:
+        self.launch()
+        self.connect()
+
+    def launch(self) -> None:
+        """Listen and start every simulator without waiting for them: a Unity build takes seconds
+        to boot, which the trainer spends importing torch and building its networks."""
         try:
             for w in self.workers:
-                w.connect()
+                w.launch()
+        except BaseException:
+            self.close()
+            raise
+
+    def connect(self) -> None:
+        """Handshake with every launched simulator (waits up to --timeout-wait for each)."""
+        try:
+            for w in self.workers:
+                w.handshake()
         except BaseException:
             self.close()
             raise
