@@ -4,6 +4,7 @@ from __future__ import annotations
 import logging
 import socket
 import threading
+import time
 
 import grpc
 import numpy as np
@@ -259,5 +260,11 @@ def test_client_that_goes_away_mid_call_stops_the_endpoint(endpoint, port):
     assert not t.is_alive() and "error" not in endpoint_thread_result  # M2 is pending now
     m2_future.cancel()
     channel.close()
+    # "mid-call" = before the trainer answers: wait until the server has seen the cancellation
+    # (an answer racing the cancel is reported later, by is_alive or --timeout-wait)
+    deadline = time.monotonic() + 10
+    while not endpoint.client_gone and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert endpoint.client_gone
     with pytest.raises(UnityCommunicatorStoppedError, match="dropped"):
         endpoint.reset(b"")

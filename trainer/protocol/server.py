@@ -216,6 +216,11 @@ class UnityEndpoint:
             self._server.stop(grace=2.0).wait(5.0)
             self._server = None
 
+    @property
+    def client_gone(self) -> bool:
+        """The simulator dropped a call before it was answered (crash, cancel)."""
+        return self._rendezvous.client_gone
+
     def __enter__(self) -> "UnityEndpoint":
         return self
 
