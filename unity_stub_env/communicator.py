@@ -18,7 +18,6 @@ import uuid
 import grpc
 
 from protos.communicator_objects import (
-    capabilities_pb2,
     header_pb2,
     unity_input_pb2,
     unity_message_pb2,
@@ -27,6 +26,7 @@ from protos.communicator_objects import (
 )
 from protos.communicator_objects.unity_to_external_pb2_grpc import UnityToExternalProtoStub
 from trainer.protocol import side_channels as sc
+from trainer.protocol.codec import all_true_capabilities
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
 logger = logging.getLogger("unity_stub_env")
@@ -54,14 +54,6 @@ class SessionEnd(Exception):
     def __init__(self, message: str, exit_code: int = 0) -> None:
         super().__init__(message)
         self.exit_code = exit_code
-
-
-def all_capabilities() -> capabilities_pb2.UnityRLCapabilitiesProto:
-    return capabilities_pb2.UnityRLCapabilitiesProto(
-        baseRLCapabilities=True, concatenatedPngObservations=True, compressedChannelMapping=True,
-        hybridActions=True, trainingAnalytics=True, variableLengthObservation=True,
-        multiAgentGroups=True,
-    )
 
 
 def communication_versions_compatible(unity_version: str, trainer_version: str) -> bool:
@@ -134,7 +126,7 @@ class RpcCommunicator:
         """Send M1 and M2. Returns (init input from M1's answer, rl_input of M2's answer)."""
         academy = unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
             name=ACADEMY_NAME, communication_version=UNITY_COMMUNICATION_VERSION,
-            package_version=UNITY_PACKAGE_VERSION, capabilities=all_capabilities(),
+            package_version=UNITY_PACKAGE_VERSION, capabilities=all_true_capabilities(),  # Unity 3.0 reports all 7
         )
         first = self._exchange_raw(_wrap(unity_output_pb2.UnityOutputProto(rl_initialization_output=academy)))
         init_input = first.unity_input.rl_initialization_input
