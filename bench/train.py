@@ -118,17 +118,25 @@ def read_rewards(behavior_dir: Path) -> list[dict]:
             for e in sorted(events.Scalars(REWARD_TAG), key=lambda e: e.step)]
 
 
-def timers_total(run_dir: Path) -> float | None:
-    path = run_dir / "run_logs" / "timers.json"
+def read_timers(run_dir: Path) -> dict | None:
+    """The run's ``run_logs/timers.json`` tree (both trainers write one), or None."""
     try:
-        return float(json.loads(path.read_text())["total"])
-    except (OSError, KeyError, ValueError, TypeError):
+        return json.loads((run_dir / "run_logs" / "timers.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def timers_total(timers: dict | None) -> float | None:
+    try:
+        return float(timers["total"])
+    except (KeyError, ValueError, TypeError):
         return None
 
 
 def summarize(label: str, run: dict, rewards: list[dict], run_dir: Path) -> dict:
     """Rates from the process wall time and from the summary events' own wall times."""
     final_step = rewards[-1]["step"] if rewards else 0
+    timers = read_timers(run_dir)
     steady = None
     if len(rewards) >= 2:
         span = rewards[-1]["wall_time"] - rewards[0]["wall_time"]
@@ -136,8 +144,8 @@ def summarize(label: str, run: dict, rewards: list[dict], run_dir: Path) -> dict
     return {"trainer": label, **run, "final_step": final_step,
             "agent_steps_per_s": final_step / run["wall_s"] if run["wall_s"] > 0 else None,
             "agent_steps_per_cpu_s": final_step / run["cpu_s"] if run["cpu_s"] > 0 else None,
-            "steady_steps_per_s": steady, "timers_total_s": timers_total(run_dir),
-            "rewards": rewards}
+            "steady_steps_per_s": steady, "timers_total_s": timers_total(timers),
+            "timers": timers, "rewards": rewards}
 
 
 def train(label: str, learn: Path, env_arg: str, config: Path, workdir: Path, args,

@@ -27,14 +27,21 @@ from trainer.errors import (
     UnityTimeOutError,
     UnityVersionError,
 )
-from trainer.protocol.server import UnityEndpoint
+from trainer.protocol.server import TRANSPORT_ENV, TRANSPORTS, UnityEndpoint
 from trainer.protocol.types import ActionTuple
 
 pytestmark = pytest.mark.timeout(60)
 
 
+@pytest.fixture(params=TRANSPORTS, autouse=True)
+def transport(request, monkeypatch):
+    """Every test runs against both server transports (our HTTP/2 one and grpcio's)."""
+    monkeypatch.setenv(TRANSPORT_ENV, request.param)
+    return request.param
+
+
 @pytest.fixture
-def endpoint(port):
+def endpoint(port, transport):
     ep = UnityEndpoint(port, timeout_wait=10.0)
     ep.start()
     yield ep

@@ -1,9 +1,14 @@
 """The gRPC server end of ONE simulator connection (spec §1).
 
 The simulator (Unity or unity-stub-env) is the gRPC client: every message it sends is the request
-of an ``Exchange`` call, and the trainer's next message is that call's response. The servicer is
-a thin rendezvous: it parks each incoming call in a slot and blocks until the trainer answers it
-(or the endpoint closes, or the client goes away). All decoding happens on the trainer's thread.
+of an ``Exchange`` call, and the trainer's next message is that call's response. Two transports
+carry the calls, both handing the trainer raw request bytes that it parses once, on its thread:
+
+* ``http2`` (default): ``trainer.protocol.http2``, a single-threaded HTTP/2 server; the
+  trainer's thread reads requests off the socket and writes answers itself.
+* ``grpcio`` (``MLAGENTS_LIKE_TRANSPORT=grpcio``): grpcio's server; a servicer thread parks each
+  call in a slot until the trainer answers it. Kept as a fallback and as the reference the
+  tests run against too.
 
     endpoint = UnityEndpoint(port=5005, is_alive=process_is_running)
     endpoint.start()
@@ -16,6 +21,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import os
 import socket
 import threading
 import time
@@ -24,11 +30,9 @@ from typing import Callable, Mapping
 
 import grpc
 
+from google.protobuf.message import DecodeError
+
 from protos.communicator_objects import unity_message_pb2
-from protos.communicator_objects.unity_to_external_pb2_grpc import (
-    UnityToExternalProtoServicer,
-    add_UnityToExternalProtoServicer_to_server,
-)
 from trainer.errors import (
     PortInUseError,
     ProtocolError,
@@ -37,6 +41,7 @@ from trainer.errors import (
     UnityTimeOutError,
 )
 from trainer.protocol import codec
+from trainer.protocol.http2 import GRPC_INTERNAL, Http2Transport
 from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
 
 logger = logging.getLogger(__name__)
@@ -53,23 +58,46 @@ def _status_message(status: int) -> unity_message_pb2.UnityMessageProto:
 
 
 _DELIVERY_WAIT_S = 0.05  # upper bound; normally the RPC completes in well under a millisecond
+SERVICE = "communicator_objects.UnityToExternalProto"
+EXCHANGE_PATH = f"/{SERVICE}/Exchange".encode()
+TRANSPORTS = ("http2", "grpcio")
+TRANSPORT_ENV = "MLAGENTS_LIKE_TRANSPORT"
+
+
+def default_transport() -> str:
+    """``http2`` (our single-threaded server) unless MLAGENTS_LIKE_TRANSPORT says ``grpcio``."""
+    value = os.environ.get(TRANSPORT_ENV, "http2").strip().lower() or "http2"
+    if value not in TRANSPORTS:
+        raise ValueError(f"{TRANSPORT_ENV}={value!r}: use one of {', '.join(TRANSPORTS)}")
+    return value
 
 
 class _PendingCall:
-    """One Exchange call the simulator is blocked in, and the answer it is waiting for."""
+    """One Exchange call the simulator is blocked in (grpcio transport), and its answer."""
 
-    __slots__ = ("request", "response", "abandoned", "_answered", "finished")
+    __slots__ = ("payload", "response", "error", "abandoned", "_answered", "finished")
 
-    def __init__(self, request: unity_message_pb2.UnityMessageProto) -> None:
-        self.request = request
-        self.response: unity_message_pb2.UnityMessageProto | None = None
+    def __init__(self, payload: bytes) -> None:
+        self.payload = payload
+        self.response: bytes | None = None
+        self.error: tuple[grpc.StatusCode, str] | None = None
         self.abandoned = False
         self._answered = threading.Event()
         self.finished = threading.Event()  # the RPC is over: the answer has left this process
 
-    def answer(self, response: unity_message_pb2.UnityMessageProto) -> None:
-        if self.response is None:
+    def answer(self, response: bytes) -> None:
+        if self.response is None and self.error is None:
             self.response = response
+        self._answered.set()
+        # Let gRPC's threads put the answer on the wire before the trainer goes back to work:
+        # otherwise they wait for the GIL while we process trajectories, and the simulator
+        # idles for that long. The wait ends as soon as the RPC completes (about 1 ms).
+        self.finished.wait(_DELIVERY_WAIT_S)
+
+    def fail(self, status: int, message: str) -> None:
+        if self.response is None and self.error is None:
+            code = next((c for c in grpc.StatusCode if c.value[0] == status), grpc.StatusCode.INTERNAL)
+            self.error = (code, message)
         self._answered.set()
 
     def abandon(self) -> None:
@@ -80,21 +108,49 @@ class _PendingCall:
         return self._answered.wait(timeout)
 
 
-class _Rendezvous(UnityToExternalProtoServicer):
-    """Servicer + slot: hands each incoming call to the trainer thread that is waiting for it."""
+class _GrpcioTransport:
+    """grpcio's server with a rendezvous: each incoming call is parked in a slot until the
+    trainer's thread answers it (or the transport closes, or the client goes away)."""
 
-    def __init__(self) -> None:
+    def __init__(self, bind: str, port: int, max_message_bytes: int) -> None:
+        self.bind = bind
+        self.port = port
+        self.max_message_bytes = max_message_bytes
         self._cond = threading.Condition()
         self._incoming: collections.deque[_PendingCall] = collections.deque()
+        self._server: grpc.Server | None = None
         self.closed = False
         self.client_gone = False
 
+    def start(self) -> None:
+        server = grpc.server(
+            ThreadPoolExecutor(max_workers=4, thread_name_prefix=f"unity-endpoint-{self.port}"),
+            options=[
+                ("grpc.max_receive_message_length", self.max_message_bytes),
+                ("grpc.max_send_message_length", self.max_message_bytes),
+                ("grpc.so_reuseport", 0),  # a second server on this port must fail
+            ],
+        )
+        handler = grpc.unary_unary_rpc_method_handler(self._exchange)  # raw bytes both ways
+        server.add_generic_rpc_handlers([grpc.method_handlers_generic_handler(SERVICE, {"Exchange": handler})])
+        host = f"[{self.bind}]" if ":" in self.bind else self.bind
+        try:
+            bound_port = server.add_insecure_port(f"{host}:{self.port}")
+        except RuntimeError:
+            bound_port = 0
+        if bound_port == 0:
+            server.stop(None)
+            raise OSError(f"cannot bind {host}:{self.port}")
+        self.port = bound_port
+        server.start()
+        self._server = server
+
     # ---- gRPC side
-    def Exchange(self, request, context):  # noqa: N802 (gRPC method name)
+    def _exchange(self, request: bytes, context):
         call = _PendingCall(request)
         with self._cond:
             if self.closed:
-                return _status_message(STATUS_CLOSING)
+                return _status_message(STATUS_CLOSING).SerializeToString()
             self._incoming.append(call)
             self._cond.notify_all()
         if not context.add_callback(lambda: self._on_rpc_done(call)):
@@ -102,12 +158,16 @@ class _Rendezvous(UnityToExternalProtoServicer):
         while not call.wait(1.0):
             if not context.is_active():
                 self._on_rpc_done(call)
-        return call.response if call.response is not None else _status_message(STATUS_CLOSING)
+        if call.error is not None:
+            context.abort(*call.error)
+        if call.response is not None:
+            return call.response
+        return _status_message(STATUS_CLOSING).SerializeToString()
 
     def _on_rpc_done(self, call: _PendingCall) -> None:
         """The RPC ended; if it was never answered the client went away (crash, cancel)."""
         call.finished.set()
-        if call.response is None:
+        if call.response is None and call.error is None:
             call.abandon()
             with self._cond:
                 self.client_gone = True
@@ -122,14 +182,21 @@ class _Rendezvous(UnityToExternalProtoServicer):
             )
             return self._incoming.popleft() if self._incoming else None
 
-    def close(self) -> list[_PendingCall]:
-        """Refuse new calls; return the queued ones so the caller can answer them."""
+    def close(self, grace: float = 2.0) -> None:
+        """Refuse new calls, answer queued ones with 400, stop serving."""
         with self._cond:
             self.closed = True
             queued = list(self._incoming)
             self._incoming.clear()
             self._cond.notify_all()
-        return queued
+        closing = _status_message(STATUS_CLOSING).SerializeToString()
+        for call in queued:
+            call.response = closing
+            call._answered.set()
+        if self._server is not None:
+            # the grace period lets the 400 answers reach the simulator before sockets close
+            self._server.stop(grace=grace).wait(grace + 3.0)
+            self._server = None
 
 
 class UnityEndpoint:
@@ -142,6 +209,7 @@ class UnityEndpoint:
         timeout_wait: float = 60.0,
         is_alive: Callable[[], bool] | None = None,
         describe: str = "",
+        transport: str | None = None,
     ) -> None:
         self.port = port
         self.bind = bind
@@ -150,9 +218,11 @@ class UnityEndpoint:
         self.describe = describe
         self.behavior_specs: dict[str, BehaviorSpec] = {}
         self.init_output = None  # UnityRLInitializationOutputProto from M1
-        self._rendezvous = _Rendezvous()
-        self._server: grpc.Server | None = None
-        self._pending: _PendingCall | None = None
+        self.transport_name = transport or default_transport()
+        if self.transport_name not in TRANSPORTS:
+            raise ValueError(f"unknown transport {self.transport_name!r}")
+        self._transport = None
+        self._pending = None  # the simulator call we owe an answer
         self._deciding: dict[str, int] = {}  # agents per behavior that wait for an action
         self._messages_received = 0
         self._closed = False
@@ -161,26 +231,16 @@ class UnityEndpoint:
     def start(self) -> None:
         """Check the port is free, then serve UnityToExternalProto on ``bind:port``."""
         self._check_port_free()
-        server = grpc.server(
-            ThreadPoolExecutor(max_workers=4, thread_name_prefix=f"unity-endpoint-{self.port}"),
-            options=[
-                ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
-                ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
-                ("grpc.so_reuseport", 0),  # a second server on this port must fail
-            ],
-        )
-        add_UnityToExternalProtoServicer_to_server(self._rendezvous, server)
-        host = f"[{self.bind}]" if ":" in self.bind else self.bind
+        if self.transport_name == "grpcio":
+            transport = _GrpcioTransport(self.bind, self.port, MAX_MESSAGE_BYTES)
+        else:
+            transport = Http2Transport(self.bind, self.port, EXCHANGE_PATH, MAX_MESSAGE_BYTES)
         try:
-            bound_port = server.add_insecure_port(f"{host}:{self.port}")
-        except RuntimeError:
-            bound_port = 0
-        if bound_port == 0:
-            server.stop(None)
-            raise self._port_in_use_error()
-        self.port = bound_port
-        server.start()
-        self._server = server
+            transport.start()
+        except OSError:
+            raise self._port_in_use_error() from None
+        self.port = transport.port
+        self._transport = transport
 
     def _check_port_free(self) -> None:
         family = socket.AF_INET6 if ":" in self.bind else socket.AF_INET
@@ -205,21 +265,21 @@ class UnityEndpoint:
         if self._closed:
             return
         self._closed = True
-        to_answer = self._rendezvous.close()
         if self._pending is not None:
-            to_answer.insert(0, self._pending)
+            self._pending.answer(_status_message(STATUS_CLOSING).SerializeToString())
             self._pending = None
-        for call in to_answer:
-            call.answer(_status_message(STATUS_CLOSING))
-        if self._server is not None:
-            # the grace period lets the 400 answers reach the simulator before sockets close
-            self._server.stop(grace=2.0).wait(5.0)
-            self._server = None
+        if self._transport is not None:
+            # answers queued calls with 400; the grace period lets answers reach the simulator
+            self._transport.close(grace=2.0)
 
     @property
     def client_gone(self) -> bool:
         """The simulator dropped a call before it was answered (crash, cancel)."""
-        return self._rendezvous.client_gone
+        if self._transport is None:
+            return False
+        if isinstance(self._transport, Http2Transport):
+            self._transport.poll()  # nothing reads the sockets between our calls
+        return self._transport.client_gone
 
     def __enter__(self) -> "UnityEndpoint":
         return self
@@ -312,15 +372,11 @@ class UnityEndpoint:
         if self._pending is None:
             raise RuntimeError("no simulator call is pending: receive() before sending again")
         call, self._pending = self._pending, None
-        call.answer(response)
-        # Let gRPC's threads put the answer on the wire before the trainer goes back to work:
-        # otherwise they wait for the GIL while we process trajectories, and the simulator
-        # idles for that long. The wait ends as soon as the RPC completes (well under 1 ms).
-        call.finished.wait(_DELIVERY_WAIT_S)
+        call.answer(response.SerializeToString())
 
-    def _wait_for_call(self) -> _PendingCall:
+    def _wait_for_call(self) -> "_Call":
         """Block until the simulator's next call arrives; it becomes the pending call."""
-        if self._server is None or self._closed:
+        if self._transport is None or self._closed:
             raise RuntimeError("UnityEndpoint is not started or already closed")
         if self._pending is not None:
             raise RuntimeError("the previous simulator call has not been answered yet")
@@ -328,13 +384,13 @@ class UnityEndpoint:
         poll_interval = max(self.timeout_wait / 10.0, 0.001)
         wait = 0.0  # first look without waiting, so a dead simulator is reported at once
         while True:
-            call = self._rendezvous.take(wait)
+            call = self._transport.take(wait)
             if call is not None:
                 break
-            if self._rendezvous.closed:
+            if self._transport.closed:
                 raise UnityCommunicatorStoppedError(f"The endpoint on port {self.port} was closed.")
             self._raise_if_simulator_died()
-            if self._rendezvous.client_gone:
+            if self._transport.client_gone:
                 raise UnityCommunicatorStoppedError(
                     f"The simulator{self._for()} on port {self.port} dropped its connection."
                 )
@@ -342,13 +398,23 @@ class UnityEndpoint:
             if remaining <= 0:
                 raise self._timeout_error(time.monotonic() - started)
             wait = min(poll_interval, remaining)
+        try:
+            request = unity_message_pb2.UnityMessageProto.FromString(call.payload)
+        except DecodeError as error:
+            call.fail(GRPC_INTERNAL, "the message is not a valid UnityMessageProto")
+            raise ProtocolError(
+                f"The simulator{self._for()} on port {self.port} sent a message that is not a valid "
+                f"UnityMessageProto ({error}); is it an ML-Agents environment speaking "
+                "communication API 1.x? Rebuild it with the ML-Agents package of Release 22."
+            ) from None
+        call = _Call(call, request)
         self._pending = call
         self._messages_received += 1
-        if call.request.header.status != STATUS_OK:
+        if request.header.status != STATUS_OK:
             self._answer(_status_message(STATUS_CLOSING))
             raise UnityCommunicatorStoppedError(
                 f"The simulator{self._for()} on port {self.port} closed the connection "
-                f"(status {call.request.header.status})."
+                f"(status {request.header.status})."
             )
         return call
 
@@ -370,3 +436,16 @@ class UnityEndpoint:
 
     def _for(self) -> str:
         return f" ({self.describe})" if self.describe else ""
+
+
+class _Call:
+    """A transport's call with its request parsed once, on the trainer's thread."""
+
+    __slots__ = ("raw", "request")
+
+    def __init__(self, raw, request: unity_message_pb2.UnityMessageProto) -> None:
+        self.raw = raw
+        self.request = request
+
+    def answer(self, response: bytes) -> None:
+        self.raw.answer(response)
