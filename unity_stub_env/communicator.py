@@ -10,12 +10,14 @@ session; ``request_stop`` (SIGTERM/SIGINT) makes the next wait send one status-4
 from __future__ import annotations
 
 import logging
+import os
 import signal
 import threading
 import time
 import uuid
 
 import grpc
+from google.protobuf.message import DecodeError
 
 from protos.communicator_objects import (
     header_pb2,
@@ -24,9 +26,9 @@ from protos.communicator_objects import (
     unity_output_pb2,
     unity_rl_initialization_output_pb2,
 )
-from protos.communicator_objects.unity_to_external_pb2_grpc import UnityToExternalProtoStub
 from trainer.protocol import side_channels as sc
 from trainer.protocol.codec import all_true_capabilities
+from trainer.protocol.http2 import CallError, Http2Channel
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
 logger = logging.getLogger("unity_stub_env")
@@ -73,6 +75,44 @@ def communication_versions_compatible(unity_version: str, trainer_version: str) 
     return unity[0] == trainer[0]
 
 
+EXCHANGE_PATH = "/communicator_objects.UnityToExternalProto/Exchange"
+
+
+class _GrpcioChannel:
+    """grpcio's client with raw bytes (MLAGENTS_LIKE_TRANSPORT=grpcio); same calls as Http2Channel."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self._channel = grpc.insecure_channel(f"{host}:{port}", options=_CHANNEL_OPTIONS)
+        self._exchange = self._channel.unary_unary(EXCHANGE_PATH)
+        self._ready = grpc.channel_ready_future(self._channel)
+
+    def connect(self, timeout: float) -> bool:
+        try:
+            self._ready.result(timeout=timeout)
+            return True
+        except grpc.FutureTimeoutError:
+            return False
+
+    def call(self, request: bytes, timeout: float | None = None) -> bytes:
+        # A plain blocking call: gRPC runs Python signal handlers while it waits, so SIGTERM
+        # still works.
+        try:
+            return self._exchange(request, timeout=timeout)
+        except grpc.RpcError as error:
+            raise CallError(error.code().name, error.details() or "") from None
+
+    def close(self) -> None:
+        self._ready.cancel()
+        self._channel.close()
+
+
+def _open_channel(port: int):
+    """The stub's gRPC client: our blocking HTTP/2 one (no threads; default) or grpcio's."""
+    if os.environ.get("MLAGENTS_LIKE_TRANSPORT", "").strip().lower() == "grpcio":
+        return _GrpcioChannel("localhost", port)
+    return Http2Channel("localhost", port, EXCHANGE_PATH.encode())
+
+
 class _AbortExchange(BaseException):
     """Raised by SIGALRM inside a blocking exchange after a stop signal's grace period."""
 
@@ -86,10 +126,10 @@ class RpcCommunicator:
 
     def __init__(self, port: int, connect_timeout: float = 60.0) -> None:
         self.address = f"localhost:{port}"
+        self.port = port
         self.connect_timeout = float(connect_timeout)
         self.stop_requested = False
-        self._channel: grpc.Channel | None = None
-        self._stub: UnityToExternalProtoStub | None = None
+        self._channel = None
         self._sent_brain_keys: set[str] = set()
 
     def request_stop(self, *_args) -> None:
@@ -103,24 +143,24 @@ class RpcCommunicator:
     # Connection and handshake ---------------------------------------------------------------
     def connect(self) -> None:
         """Open the channel, retrying until ``connect_timeout``; SessionEnd(exit 1) if it fails."""
-        self._channel = grpc.insecure_channel(self.address, options=_CHANNEL_OPTIONS)
-        self._stub = UnityToExternalProtoStub(self._channel)
-        ready = grpc.channel_ready_future(self._channel)
+        self._channel = _open_channel(self.port)
         deadline = time.monotonic() + self.connect_timeout
         while True:
-            try:
-                ready.result(timeout=min(_POLL_S, max(deadline - time.monotonic(), 0.001)))
+            started = time.monotonic()
+            wait = min(_POLL_S, max(deadline - started, 0.001))
+            if self._channel.connect(wait):
                 return
-            except grpc.FutureTimeoutError:
-                if self.stop_requested:
-                    raise SessionEnd("Stopped by a signal before the trainer answered.", 0) from None
-                if time.monotonic() >= deadline:
-                    ready.cancel()
-                    raise SessionEnd(
-                        f"Could not connect to a trainer at {self.address} within "
-                        f"{self.connect_timeout:g} s. Start the trainer first (it listens on that port) "
-                        "or pass the port it uses with --mlagents-port; raise --connect-timeout if "
-                        "the trainer starts slowly.", 1) from None
+            if self.stop_requested:
+                self._close_channel()
+                raise SessionEnd("Stopped by a signal before the trainer answered.", 0) from None
+            if time.monotonic() >= deadline:
+                self._close_channel()
+                raise SessionEnd(
+                    f"Could not connect to a trainer at {self.address} within "
+                    f"{self.connect_timeout:g} s. Start the trainer first (it listens on that port) "
+                    "or pass the port it uses with --mlagents-port; raise --connect-timeout if "
+                    "the trainer starts slowly.", 1) from None
+            time.sleep(max(0.0, min(0.05, wait - (time.monotonic() - started))))  # refused at once
 
     def initialize(self):
         """Send M1 and M2. Returns (init input from M1's answer, rl_input of M2's answer)."""
@@ -169,17 +209,23 @@ class RpcCommunicator:
         return answer.unity_input.rl_input
 
     def _exchange_raw(self, message: unity_message_pb2.UnityMessageProto) -> unity_message_pb2.UnityMessageProto:
-        # A plain blocking call: gRPC runs Python signal handlers while it waits, so SIGTERM
-        # still works, and no thread or future is created per exchange (the hot path).
+        # A plain blocking call on this thread: no thread or future per exchange (the hot path);
+        # a stop signal's SIGALRM interrupts it after the grace period.
         try:
-            answer = self._stub.Exchange(message)
+            raw = self._channel.call(message.SerializeToString())
         except _AbortExchange:
             self.close(send_closing=True)
             raise SessionEnd("Stopped by a signal; sent status 400 to the trainer.", 0) from None
-        except grpc.RpcError as error:
+        except CallError as error:
             self._close_channel()
-            raise SessionEnd(f"The trainer at {self.address} went away ({error.code().name}); "
+            raise SessionEnd(f"The trainer at {self.address} went away ({error.code}); "
                              "quitting like a Unity player does.", 0) from None
+        try:
+            answer = unity_message_pb2.UnityMessageProto.FromString(raw)
+        except DecodeError:
+            self.close(send_closing=False)
+            raise SessionEnd(f"The trainer at {self.address} answered with a message that is not a "
+                             "UnityMessageProto; is it an ML-Agents trainer?", 1) from None
         if answer.header.status != STATUS_OK:
             self._close_channel()
             raise SessionEnd(f"The trainer closed the session (status {answer.header.status}).", 0)
@@ -192,10 +238,10 @@ class RpcCommunicator:
         """Like Unity's ``Dispose``: one status-400 message (answer ignored), then shut down."""
         if self.stop_requested and hasattr(signal, "setitimer"):
             signal.setitimer(signal.ITIMER_REAL, 0)  # the abort timer is no longer needed
-        if send_closing and self._stub is not None:
+        if send_closing and self._channel is not None:
             try:
-                self._stub.Exchange(_wrap(None, STATUS_CLOSING), timeout=_CLOSE_TIMEOUT_S)
-            except grpc.RpcError:
+                self._channel.call(_wrap(None, STATUS_CLOSING).SerializeToString(), timeout=_CLOSE_TIMEOUT_S)
+            except (CallError, _AbortExchange):
                 pass
         self._close_channel()
 
@@ -203,7 +249,6 @@ class RpcCommunicator:
         if self._channel is not None:
             self._channel.close()
             self._channel = None
-            self._stub = None
 
 
 def _wrap(output, status: int = STATUS_OK) -> unity_message_pb2.UnityMessageProto:
