@@ -6,7 +6,9 @@ this module does I/O or keeps state.
 """
 from __future__ import annotations
 
+import functools
 import itertools
+import math
 import re
 from typing import Mapping, Sequence
 
@@ -165,14 +167,25 @@ def steps_from_agent_infos(
     ).reshape(n, 6)
     floats = scalars[:, :2].astype(np.float32)
     agent_id, group_id = scalars[:, 2].astype(np.int64), scalars[:, 3].astype(np.int32)
-    done, max_step = scalars[:, 4].astype(bool), scalars[:, 5].astype(bool)
-    _require_finite(floats[:, 0], behavior_name, "reward", agent_id)
-    _require_finite(floats[:, 1], behavior_name, "group_reward", agent_id)
+    done, max_step = scalars[:, 4] != 0, scalars[:, 5] != 0
+    if not np.isfinite(floats).all():
+        _require_finite(floats[:, 0], behavior_name, "reward", agent_id)
+        _require_finite(floats[:, 1], behavior_name, "group_reward", agent_id)
     all_obs = [a.observations for a in agent_infos]
     obs = [
         _stack_observation(behavior_name, index, obs_spec, all_obs, agent_id)
         for index, obs_spec in enumerate(spec.observation_specs)
     ]
+    if not done.any():  # the common message: nobody finished, no boolean indexing needed
+        decision = DecisionSteps(
+            obs=obs,
+            reward=floats[:, 0].copy(),
+            agent_id=agent_id,
+            action_mask=_action_masks(agent_infos, None, spec.action_spec),
+            group_id=group_id,
+            group_reward=floats[:, 1].copy(),
+        )
+        return decision, _empty_terminal(spec)
     deciding = ~done
     decision = DecisionSteps(
         obs=[o[deciding] for o in obs],
@@ -191,6 +204,12 @@ def steps_from_agent_infos(
         group_reward=floats[done, 1],
     )
     return decision, terminal
+
+
+@functools.lru_cache(maxsize=64)
+def _empty_terminal(spec: BehaviorSpec) -> TerminalSteps:
+    """Shared by every message without terminal agents (zero-row arrays are never written)."""
+    return TerminalSteps.empty(spec)
 
 
 def _require_finite(values: np.ndarray, behavior: str, field: str, agent_id: np.ndarray) -> None:
@@ -233,10 +252,10 @@ def _stack_float_data(
     float32 payload, so n serialized messages of equal length form an [n, header + 4*size]
     byte matrix whose payload columns are the observations.
     """
-    n, size = len(sensor_obs), int(np.prod(shape, dtype=np.int64))
+    n, size = len(sensor_obs), math.prod(shape)
     if size == 0:
         return np.zeros((n, *shape), dtype=np.float32)
-    header = b"\x0a" + _varint(4 * size)
+    header = _float_data_header(4 * size)
     row_bytes = len(header) + 4 * size
     parts = [o.float_data.SerializeToString() for o in sensor_obs]
     for row, part in enumerate(parts):
@@ -249,6 +268,11 @@ def _stack_float_data(
     matrix = np.frombuffer(b"".join(parts), dtype=np.uint8).reshape(n, row_bytes)
     payload = np.ascontiguousarray(matrix[:, len(header):])
     return payload.view("<f4").astype(np.float32, copy=False).reshape(n, *shape)
+
+
+@functools.lru_cache(maxsize=256)
+def _float_data_header(byte_length: int) -> bytes:
+    return b"\x0a" + _varint(byte_length)
 
 
 def _varint(value: int) -> bytes:
@@ -284,23 +308,34 @@ def _stack_visual(
 
 
 def _action_masks(
-    agent_infos: Sequence, deciding: np.ndarray, action_spec: ActionSpec
+    agent_infos: Sequence, deciding: np.ndarray | None, action_spec: ActionSpec
 ) -> list[np.ndarray] | None:
     """Per branch bool [n_deciding, branch_size], True = masked; None without discrete branches.
 
-    A mask whose length differs from the sum of the branch sizes is ignored (nothing masked).
+    ``deciding`` None means every agent. A mask whose length differs from the sum of the branch
+    sizes is ignored (nothing masked).
     """
     branches = action_spec.discrete_branches
     if not branches:
         return None
     total = int(sum(branches))
-    masks = [a.action_mask for a, d in zip(agent_infos, deciding) if d]
+    if deciding is None:
+        masks = [a.action_mask for a in agent_infos]
+    else:
+        masks = [a.action_mask for a, d in zip(agent_infos, deciding) if d]
     matrix = np.zeros((len(masks), total), dtype=bool)
     rows = [row for row, mask in enumerate(masks) if len(mask) == total]
     if rows:
         flat = itertools.chain.from_iterable(masks[row] for row in rows)
         matrix[rows] = np.fromiter(flat, dtype=bool, count=len(rows) * total).reshape(-1, total)
-    return np.split(matrix, np.cumsum(branches)[:-1], axis=1)
+    bounds = _branch_bounds(branches)
+    return [matrix[:, start:end] for start, end in bounds]
+
+
+@functools.lru_cache(maxsize=64)
+def _branch_bounds(branches: tuple[int, ...]) -> tuple[tuple[int, int], ...]:
+    ends = np.cumsum(branches).tolist()
+    return tuple(zip([0] + ends[:-1], ends))
 
 
 # --------------------------------------------------------------------------- trainer → Unity
