@@ -23,7 +23,7 @@ from typing import Sequence
 import numpy as np
 
 from protos.communicator_objects import agent_action_pb2, agent_info_pb2
-from unity_stub_env.agents import EpisodeIdCounter, build_agent_infos
+from unity_stub_env.agents import EncodedInfos, EpisodeIdCounter, encode_agent_infos
 from unity_stub_env.tasks.base import Stat, Task
 
 logger = logging.getLogger("unity_stub_env")
@@ -48,7 +48,7 @@ class Academy:
         self.pending_reward = np.zeros(n, dtype=np.float32)
         self.continuous = np.zeros((n, task.action_spec.continuous_size), dtype=np.float32)
         self.discrete = np.zeros((n, len(task.action_spec.discrete_branches)), dtype=np.int32)
-        self.pending_done_infos: list[agent_info_pb2.AgentInfoProto] = []
+        self.pending_done_infos = EncodedInfos()
         self.pending_stats: list[Stat] = []
         self.completed_episodes = 0
         self.environment_reset()
@@ -61,19 +61,24 @@ class Academy:
         self.pending_reward[:] = 0.0
         self.continuous[:] = 0.0
         self.discrete[:] = 0
-        self.pending_done_infos.clear()
+        self.pending_done_infos = EncodedInfos()
 
-    def collect_infos(self) -> list[agent_info_pb2.AgentInfoProto]:
-        """Terminal infos since the last message, then one decision request per agent."""
+    def collect_encoded(self) -> EncodedInfos:
+        """Terminal infos since the last message, then one decision request per agent
+        (serialized; see ``agents.encode_agent_infos``)."""
         task = self.task
-        decisions = build_agent_infos(
+        decisions = encode_agent_infos(
             task.observation_specs, task.observe(), self.pending_reward, self.episode_ids,
             done=False, action_mask=task.action_mask(),
         )
         infos = self.pending_done_infos + decisions
-        self.pending_done_infos = []
+        self.pending_done_infos = EncodedInfos()
         self.pending_reward[:] = 0.0
         return infos
+
+    def collect_infos(self) -> list[agent_info_pb2.AgentInfoProto]:
+        """``collect_encoded`` as AgentInfoProto objects."""
+        return self.collect_encoded().protos()
 
     def take_stats(self) -> list[Stat]:
         stats, self.pending_stats = self.pending_stats, []
@@ -123,10 +128,10 @@ class Academy:
         """Queue the terminal infos of ``done`` [n] agents, then start their next episode."""
         task = self.task
         observations = [obs[done] for obs in task.observe()]
-        self.pending_done_infos.extend(build_agent_infos(
+        self.pending_done_infos += encode_agent_infos(
             task.observation_specs, observations, self.pending_reward[done], self.episode_ids[done],
             done=True, interrupted=interrupted[done],
-        ))
+        )
         finished = int(done.sum())
         self.completed_episodes += finished
         if self.completed_episodes // 100 != (self.completed_episodes - finished) // 100:

@@ -15,7 +15,81 @@ from protos.communicator_objects import (
     observation_pb2,
     space_type_pb2,
 )
+from trainer.protocol import wire
 from trainer.protocol.types import ActionSpec, ObservationSpec
+
+
+class EncodedInfos:
+    """Serialized ListAgentInfoProto content (repeated ``value`` records) for ``count`` agents.
+
+    Concatenating two of them appends the agents of the second after the first's, as merging
+    two serialized messages with a repeated field does.
+    """
+
+    __slots__ = ("data", "count")
+
+    def __init__(self, data: bytes = b"", count: int = 0) -> None:
+        self.data = data
+        self.count = count
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __add__(self, other: "EncodedInfos") -> "EncodedInfos":
+        return EncodedInfos(self.data + other.data, self.count + other.count)
+
+    def protos(self) -> list[agent_info_pb2.AgentInfoProto]:
+        from protos.communicator_objects import unity_rl_output_pb2
+
+        parsed = unity_rl_output_pb2.UnityRLOutputProto.ListAgentInfoProto.FromString(self.data)
+        return list(parsed.value)
+
+
+def encode_agent_infos(
+    observation_specs: Sequence[ObservationSpec],
+    observations: Sequence[np.ndarray],
+    rewards: np.ndarray,
+    episode_ids: np.ndarray,
+    done: bool,
+    interrupted: np.ndarray | None = None,
+    action_mask: np.ndarray | None = None,
+) -> EncodedInfos:
+    """The AgentInfoProtos ``build_agent_infos`` makes, serialized for all rows at once.
+
+    Every agent's record has the same layout: reward (7), done (8), max_step_reached (9), the
+    action mask (11, packed), one ObservationProto per sensor (13: shape, float_data,
+    dimension_properties, observation_type, name) and the episode id (10) last as a 5-byte
+    varint, so the records form one byte matrix (see trainer.protocol.wire).
+    """
+    count = len(episode_ids)
+    if count == 0:
+        return EncodedInfos()
+    parts: list = [wire.tag(7, wire.I32), wire.float_columns(rewards, count),
+                   wire.tag(8, wire.VARINT) + (b"\x01" if done else b"\x00"),
+                   wire.tag(9, wire.VARINT)]
+    flags = np.zeros((count, 1), dtype=np.uint8)
+    if done and interrupted is not None:
+        flags[:, 0] = np.asarray(interrupted, dtype=bool)
+    parts.append(flags)
+    if action_mask is not None:
+        mask = np.asarray(action_mask, dtype=bool).reshape(count, -1).astype(np.uint8)
+        parts += [wire.len_prefix(11, mask.shape[1]), mask]
+    for spec, obs in zip(observation_specs, observations):
+        size = int(np.prod(spec.shape, dtype=np.int64))
+        shape = b"".join(wire.varint(int(d)) for d in spec.shape)
+        float_data = wire.len_prefix(1, 4 * size)
+        head = wire.len_prefix(1, len(shape)) + shape + wire.len_prefix(4, len(float_data) + 4 * size) + float_data
+        props = b"".join(wire.varint(int(p)) for p in spec.dimension_property)
+        tail = wire.len_prefix(6, len(props)) + props if props else b""
+        if int(spec.observation_type):
+            tail += wire.tag(7, wire.VARINT) + wire.varint(int(spec.observation_type))
+        if spec.name:
+            name = spec.name.encode()
+            tail += wire.len_prefix(8, len(name)) + name
+        parts += [wire.len_prefix(13, len(head) + 4 * size + len(tail)), head,
+                  wire.float_columns(obs, count), tail]
+    parts += [wire.tag(10, wire.VARINT), wire.varint5_columns(episode_ids)]
+    return EncodedInfos(wire.repeated_messages(1, wire.rows(parts, count)), count)
 
 
 class EpisodeIdCounter:

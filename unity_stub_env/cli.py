@@ -149,7 +149,7 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
             logging.shutdown()
             os._exit(3)
         exchanges += 1
-        batches = [(academy.behavior_key, academy.collect_infos(), brain) for academy, brain in academies]
+        batches = [(academy.behavior_key, academy.collect_encoded(), brain) for academy, brain in academies]
         stats = [stat for academy, _ in academies for stat in academy.take_stats()]
         rl_input = communicator.exchange_many(batches, encode_stats(stats))
         side_channels.apply(rl_input.side_channel)

@@ -29,6 +29,7 @@ from protos.communicator_objects import (
 from trainer.protocol import side_channels as sc
 from trainer.protocol.codec import all_true_capabilities
 from trainer.protocol.http2 import CallError, Http2Channel
+from unity_stub_env.agents import EncodedInfos
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
 logger = logging.getLogger("unity_stub_env")
@@ -191,7 +192,8 @@ class RpcCommunicator:
         return self.exchange_many([(behavior_key, infos, brain_parameters)], side_channel)
 
     def exchange_many(self, batches: list, side_channel: bytes):
-        """Send one step's agent infos of every behavior, ``[(behavior_key, infos, brain_parameters)]``.
+        """Send one step's agent infos of every behavior, ``[(behavior_key, infos, brain_parameters)]``
+        (``infos``: AgentInfoProtos or ``EncodedInfos``).
 
         ``brain_parameters`` is attached only the first time a behavior is sent with at least one
         agent info (as Unity does). Raises SessionEnd on a non-200 answer, QUIT or a lost trainer.
@@ -199,7 +201,11 @@ class RpcCommunicator:
         output = unity_output_pb2.UnityOutputProto()
         first_time = []
         for behavior_key, infos, brain_parameters in batches:
-            output.rl_output.agentInfos[behavior_key].value.extend(infos)
+            entry = output.rl_output.agentInfos[behavior_key]
+            if isinstance(infos, EncodedInfos):
+                entry.MergeFromString(infos.data)  # protobuf's C parser; re-serialized canonically
+            else:
+                entry.value.extend(infos)
             if behavior_key not in self._sent_brain_keys and len(infos) > 0:
                 output.rl_initialization_output.brain_parameters.append(brain_parameters)
                 first_time.append(behavior_key)

@@ -202,3 +202,40 @@ def test_handshake_over_http2_with_a_grpc_stub_client(monkeypatch):
     assert answers[0].unity_input.rl_initialization_input.seed == 7
     assert answers[0].unity_input.rl_initialization_input.num_areas == 2
     assert answers[1].header.status == 400
+
+
+def test_caching_decoder_reuses_only_blocks_that_leave_the_table_unchanged():
+    import hpack
+
+    encoder, decoder = hpack.Encoder(), http2.CachingDecoder()
+    first = encoder.encode([(b"grpc-status", b"0")])  # literal WITH incremental indexing
+    again = encoder.encode([(b"grpc-status", b"0")])  # now one indexed byte (dynamic entry 62)
+    assert first != again and len(again) == 1
+    assert decoder.decode(first) == [(b"grpc-status", b"0")]
+    assert first not in decoder._cache  # it changed the table: never reused
+    assert decoder.decode(again) == [(b"grpc-status", b"0")]
+    assert decoder._cache[again] == [(b"grpc-status", b"0")]  # indexed: cached
+    changed = encoder.encode([(b"x-other", b"1")])  # inserts a new entry
+    decoder.decode(changed)
+    assert decoder._cache == {}  # the table changed: every cached result is void
+    # index 62 is now the newest entry: a stale cache would still answer grpc-status
+    assert decoder.decode(again) == [(b"x-other", b"1")]
+
+
+def test_agent_actions_bytes_equal_the_one_message_at_a_time_encoding():
+    import numpy as np
+
+    from protos.communicator_objects import unity_rl_input_pb2
+    from trainer.protocol import codec
+
+    rng = np.random.default_rng(3)
+    for c, b in [(2, 0), (0, 3), (3, 2), (0, 0)]:
+        continuous = rng.normal(size=(5, c)).astype(np.float32)
+        discrete = rng.integers(0, 127, size=(5, b)).astype(np.int32)
+        fast = unity_rl_input_pb2.UnityRLInputProto.ListAgentActionProto.FromString(
+            codec.encode_agent_actions(continuous, discrete))
+        slow = unity_rl_input_pb2.UnityRLInputProto.ListAgentActionProto()
+        codec._fill_agent_actions(slow.value, continuous, discrete)
+        assert fast.SerializeToString() == slow.SerializeToString() and len(fast.value) == 5
+    # a discrete action that needs a 2-byte varint takes the message-by-message path
+    assert codec.encode_agent_actions(np.zeros((1, 0), np.float32), np.array([[200]], np.int32)) is None

@@ -17,6 +17,7 @@ import numpy as np
 from protos.communicator_objects import capabilities_pb2, command_pb2, observation_pb2
 from protos.communicator_objects import unity_rl_input_pb2
 from trainer.errors import ProtocolError, UnityVersionError
+from trainer.protocol import wire
 from trainer.protocol.png import decode_png_observation
 from trainer.protocol.types import (
     ActionSpec,
@@ -365,15 +366,44 @@ def fill_rl_input(
         continuous, discrete = _as_action_matrices(action)
         if len(continuous) == 0:
             continue
+        encoded = encode_agent_actions(continuous, discrete)
+        if encoded is not None:
+            rl_input.agent_actions[behavior_name].MergeFromString(encoded)
+        else:
+            _fill_agent_actions(rl_input.agent_actions[behavior_name].value, continuous, discrete)
+
+
+def encode_agent_actions(continuous: np.ndarray, discrete: np.ndarray) -> bytes | None:
+    """Serialized ListAgentActionProto for n agents, built as one byte matrix.
+
+    Per agent: ``vector_actions_deprecated`` (continuous then discrete, as floats),
+    ``continuous_actions``, ``discrete_actions``, each packed. None when a discrete action is
+    outside [0, 128) (its varint would not be one byte): the caller then fills messages one by one.
+    """
+    n, c = continuous.shape
+    b = discrete.shape[1]
+    if b and (discrete.min() < 0 or discrete.max() >= 128):
+        return None
+    parts: list = []
+    if c + b:
         deprecated = np.concatenate([continuous, discrete.astype(np.float32)], axis=1)
-        value = rl_input.agent_actions[behavior_name].value
-        for cont_row, disc_row, dep_row in zip(
-            continuous.tolist(), discrete.tolist(), deprecated.tolist()
-        ):
-            agent_action = value.add()
-            agent_action.vector_actions_deprecated.extend(dep_row)
-            agent_action.continuous_actions.extend(cont_row)
-            agent_action.discrete_actions.extend(disc_row)
+        parts += [wire.len_prefix(1, 4 * (c + b)), wire.float_columns(deprecated, n)]
+    if c:
+        parts += [wire.len_prefix(6, 4 * c), wire.float_columns(continuous, n)]
+    if b:
+        parts += [wire.len_prefix(7, b), discrete.astype(np.uint8)]
+    content = wire.rows(parts, n) if parts else np.zeros((n, 0), dtype=np.uint8)
+    return wire.repeated_messages(1, content)
+
+
+def _fill_agent_actions(value, continuous: np.ndarray, discrete: np.ndarray) -> None:
+    """The same messages as ``encode_agent_actions``, one AgentActionProto at a time."""
+    deprecated = np.concatenate([continuous, discrete.astype(np.float32)], axis=1)
+    for cont_row, disc_row, dep_row in zip(continuous.tolist(), discrete.tolist(), deprecated.tolist()):
+        agent_action = value.add()
+        agent_action.vector_actions_deprecated.extend(dep_row)
+        agent_action.continuous_actions.extend(cont_row)
+        agent_action.discrete_actions.extend(disc_row)
 
 
 def _as_action_matrices(action: ActionTuple) -> tuple[np.ndarray, np.ndarray]:

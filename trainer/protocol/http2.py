@@ -98,6 +98,34 @@ def trailers(status: int, message: str = "") -> bytes:
     return block
 
 
+class CachingDecoder:
+    """hpack's decoder, skipped for header blocks it has decoded before without effect.
+
+    A gRPC peer repeats the same few header blocks on every call (once their entries are in the
+    dynamic table, or as literals that are never indexed). Decoding such a block depends only
+    on the table, and leaves it unchanged, so while the table stays as it is the earlier result
+    is exact. Any block that changes the table empties the cache.
+    """
+
+    def __init__(self) -> None:
+        self._decoder = hpack.Decoder()
+        self._cache: dict[bytes, list] = {}
+
+    def decode(self, block: bytes) -> list:
+        headers = self._cache.get(block)
+        if headers is not None:
+            return headers
+        table = self._decoder.header_table
+        before = (tuple(table.dynamic_entries), table.maxsize)
+        headers = self._decoder.decode(block, raw=True)
+        if before == (tuple(table.dynamic_entries), table.maxsize):
+            if len(self._cache) < 64:
+                self._cache[block] = headers
+        else:
+            self._cache.clear()
+        return headers
+
+
 class IncomingCall:
     """One complete unary request; ``answer`` sends the response (or an error status)."""
 
@@ -144,9 +172,7 @@ class _Connection:
         self.peer = _peer_name(sock)
         self.buffer = bytearray()
         self.preface_seen = False
-        self.decoder = hpack.Decoder()
-        self._last_block: bytes | None = None
-        self._last_headers: list | None = None
+        self.decoder = CachingDecoder()
         self.streams: dict[int, _Stream] = {}
         self.pending: dict[int, IncomingCall] = {}  # handed out, not answered yet
         self.peer_initial_window = DEFAULT_WINDOW
@@ -315,19 +341,10 @@ class _Connection:
             self._end_stream(stream_id, calls)
 
     def _decode(self, block: bytes) -> list:
-        # a gRPC client repeats the same header block on every call once its entries are in the
-        # dynamic table; decoding such a block again changes nothing, so reuse the last result
-        if block == self._last_block:
-            return self._last_headers
-        table = self.decoder.header_table
-        before = (tuple(table.dynamic_entries), table.maxsize)
         try:
-            headers = self.decoder.decode(block, raw=True)
+            return self.decoder.decode(block)
         except Exception as error:  # hpack raises several error types for bad input
             raise Http2Error(f"undecodable header block ({error})", 0x9) from None
-        unchanged = before == (tuple(table.dynamic_entries), table.maxsize)
-        self._last_block, self._last_headers = (block, headers) if unchanged else (None, None)
-        return headers
 
     def _data(self, flags: int, stream_id: int, payload: bytes, calls: list) -> None:
         payload = _strip_padding(flags, payload) if flags & PADDED else payload
@@ -643,7 +660,7 @@ class Http2Channel:
         self.host, self.port, self.path = host, port, path
         self._headers = request_headers(path, f"{host}:{port}".encode())
         self.sock: socket.socket | None = None
-        self._decoder = hpack.Decoder()
+        self._decoder = CachingDecoder()
         self._buffer = bytearray()
         self._next_stream = 1
         self._send_window = DEFAULT_WINDOW
@@ -758,7 +775,7 @@ class Http2Channel:
                 else:
                     self._header_parts.append(payload)
                 if flags & END_HEADERS:
-                    headers = self._decoder.decode(b"".join(self._header_parts), raw=True)
+                    headers = self._decoder.decode(b"".join(self._header_parts))
                     if sid == stream_id and response is not None:
                         for name, value in headers:
                             if name == b":status":
