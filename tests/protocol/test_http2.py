@@ -153,8 +153,9 @@ def test_pings_are_acknowledged_and_settings_acked():
         transport.close(grace=0.2)
 
 
-def test_garbled_message_is_a_protocol_error_and_the_client_is_told(monkeypatch):
-    monkeypatch.setenv("MLAGENTS_LIKE_TRANSPORT", "http2")
+@pytest.mark.parametrize("server_transport", ["http2", "grpcio"])
+def test_garbled_message_is_a_protocol_error_and_the_client_is_told(monkeypatch, server_transport):
+    monkeypatch.setenv("MLAGENTS_LIKE_TRANSPORT", server_transport)
     port = free_port()
     endpoint = UnityEndpoint(port, timeout_wait=10.0)
     endpoint.start()

@@ -4,6 +4,7 @@ from __future__ import annotations
 import signal
 
 import numpy as np
+import pytest
 
 from tests.stub.conftest import (
     QUIT,
@@ -30,7 +31,10 @@ def position(info) -> int:
     return data.index(1.0)
 
 
-def test_handshake_m1_m2_and_brain_parameters_only_first_time(trainer, launch):
+@pytest.mark.parametrize("transport", ["http2", "grpcio"])
+def test_handshake_m1_m2_and_brain_parameters_only_first_time(trainer, launch, transport, monkeypatch):
+    # the stub's own HTTP/2 client (default) and grpcio's channel (MLAGENTS_LIKE_TRANSPORT=grpcio)
+    monkeypatch.setenv("MLAGENTS_LIKE_TRANSPORT", transport)
     process = launch(trainer.port, "basic")
     first, second, third = handshake(trainer, num_areas=2)
 
