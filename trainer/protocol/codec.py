@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+import operator
 import re
 from typing import Mapping, Sequence
 
@@ -150,6 +151,13 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec]) -> StepRes
     return StepResult(specs=new_specs, steps=steps, side_channel=output.rl_output.side_channel)
 
 
+# C-level field access for the per-agent loops (no Python frame per agent)
+_SCALAR_FIELDS = operator.attrgetter("reward", "group_reward", "id", "group_id", "done", "max_step_reached")
+_OBSERVATIONS = operator.attrgetter("observations")
+_FLOAT_DATA = operator.attrgetter("float_data")
+_SERIALIZE = operator.methodcaller("SerializeToString")
+
+
 def steps_from_agent_infos(
     behavior_name: str, agent_infos: Sequence, spec: BehaviorSpec
 ) -> tuple[DecisionSteps, TerminalSteps]:
@@ -159,20 +167,14 @@ def steps_from_agent_infos(
     """
     n = len(agent_infos)
     # one pass over the protos; float64 holds float32 rewards and int32 ids exactly
-    scalars = np.array(
-        [
-            (a.reward, a.group_reward, a.id, a.group_id, a.done, a.max_step_reached)
-            for a in agent_infos
-        ],
-        dtype=np.float64,
-    ).reshape(n, 6)
+    scalars = np.array(list(map(_SCALAR_FIELDS, agent_infos)), dtype=np.float64).reshape(n, 6)
     floats = scalars[:, :2].astype(np.float32)
     agent_id, group_id = scalars[:, 2].astype(np.int64), scalars[:, 3].astype(np.int32)
     done, max_step = scalars[:, 4] != 0, scalars[:, 5] != 0
     if not np.isfinite(floats).all():
         _require_finite(floats[:, 0], behavior_name, "reward", agent_id)
         _require_finite(floats[:, 1], behavior_name, "group_reward", agent_id)
-    all_obs = [a.observations for a in agent_infos]
+    all_obs = list(map(_OBSERVATIONS, agent_infos))
     obs = [
         _stack_observation(behavior_name, index, obs_spec, all_obs, agent_id)
         for index, obs_spec in enumerate(spec.observation_specs)
@@ -231,7 +233,7 @@ def _stack_observation(
 ) -> np.ndarray:
     """Observation ``index`` of every agent → float32 [n, *obs_spec.shape]."""
     try:
-        sensor_obs = [agent_obs[index] for agent_obs in all_obs]
+        sensor_obs = list(map(operator.itemgetter(index), all_obs))
     except IndexError:
         raise ProtocolError(
             f"An agent of behavior {behavior!r} sent fewer observations than its first agent "
@@ -258,14 +260,16 @@ def _stack_float_data(
         return np.zeros((n, *shape), dtype=np.float32)
     header = _float_data_header(4 * size)
     row_bytes = len(header) + 4 * size
-    parts = [o.float_data.SerializeToString() for o in sensor_obs]
-    for row, part in enumerate(parts):
-        if len(part) != row_bytes:
-            raise ProtocolError(
-                f"Observation {index} of agent id {int(agent_id[row])} (behavior {behavior!r}) has "
-                f"{max(len(part) - len(header), 0) // 4} floats but its sensor shape {shape} needs "
-                f"{size}; all agents of a behavior need the same sensor shapes."
-            )
+    parts = list(map(_SERIALIZE, map(_FLOAT_DATA, sensor_obs)))
+    lengths = np.fromiter(map(len, parts), dtype=np.int64, count=n)
+    wrong = np.nonzero(lengths != row_bytes)[0]
+    if len(wrong):
+        row = int(wrong[0])
+        raise ProtocolError(
+            f"Observation {index} of agent id {int(agent_id[row])} (behavior {behavior!r}) has "
+            f"{max(len(parts[row]) - len(header), 0) // 4} floats but its sensor shape {shape} needs "
+            f"{size}; all agents of a behavior need the same sensor shapes."
+        )
     matrix = np.frombuffer(b"".join(parts), dtype=np.uint8).reshape(n, row_bytes)
     payload = np.ascontiguousarray(matrix[:, len(header):])
     return payload.view("<f4").astype(np.float32, copy=False).reshape(n, *shape)
