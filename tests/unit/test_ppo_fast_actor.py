@@ -57,3 +57,27 @@ def test_load_state_dict_is_seen_and_visual_actors_are_not_supported():
     visual = ObservationSpec((3, 36, 36), (DimensionProperty.NONE, DimensionProperty.TRANSLATIONAL_EQUIVARIANCE,
                                            DimensionProperty.TRANSLATIONAL_EQUIVARIANCE), ObservationType.DEFAULT, "cam")
     assert not supports(Actor((visual, vec(2)), ActionSpec(1, ()), HP))
+
+
+def test_numpy_critic_matches_torch_and_follows_normaliser_and_weight_changes():
+    from trainer.ppo.fast_actor import NumpyCritic
+    from trainer.ppo.networks import Critic
+
+    torch.manual_seed(0)
+    critic = Critic((vec(3), vec(5)), ["extrinsic", "curiosity"], HP)
+    fast = NumpyCritic(critic)
+    rng = np.random.default_rng(2)
+    obs = [rng.standard_normal((9, 3)).astype(np.float32) * 3 + 1, rng.standard_normal((9, 5)).astype(np.float32)]
+    for round_ in range(3):
+        got = fast(obs)
+        with torch.no_grad():
+            want = critic([torch.from_numpy(o) for o in obs])
+        assert set(got) == {"extrinsic", "curiosity"}
+        for name in want:
+            assert got[name].shape == (9,)
+            np.testing.assert_allclose(got[name], want[name].numpy(), rtol=1e-5, atol=1e-6)
+        critic.update_normalization([torch.from_numpy(o * (round_ + 2)) for o in obs])
+        with torch.no_grad():
+            for p in critic.parameters():
+                if p.requires_grad:
+                    p.mul_(1.1)

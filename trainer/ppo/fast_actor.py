@@ -18,11 +18,78 @@ import torch
 from torch import nn
 
 from trainer.ppo.encoders import VectorInput
-from trainer.ppo.networks import Actor
+from trainer.ppo.networks import Actor, Critic
 
 
-def supports(actor: Actor) -> bool:
-    return all(isinstance(e, VectorInput) for e in actor.network_body.observation_encoder.encoders)
+def supports(module: Actor | Critic) -> bool:
+    return all(isinstance(e, VectorInput) for e in module.network_body.observation_encoder.encoders)
+
+
+class _Tracked:
+    """Knows when any parameter or buffer of ``module`` changed since the last look."""
+
+    def __init__(self, module: nn.Module) -> None:
+        self._tensors = list(module.parameters()) + list(module.buffers())
+        self._key: tuple | None = None
+
+    def stale(self) -> bool:
+        key = tuple((id(t), t._version) for t in self._tensors)
+        if key != self._key:
+            self._key = key
+            return True
+        return False
+
+
+def body_arrays(network_body) -> tuple[list, list]:
+    """(normalizers: (mean, std) or None per input, layers: (W^T, b) per hidden Linear) as numpy."""
+    normalizers = []
+    with torch.no_grad():
+        for encoder in network_body.observation_encoder.encoders:
+            norm = encoder.normalizer
+            if norm is None:
+                normalizers.append(None)
+            else:
+                std = torch.sqrt(norm.running_variance / norm.normalization_steps)
+                normalizers.append((norm.running_mean.numpy().astype(np.float32).copy(),
+                                    std.numpy().astype(np.float32).copy()))
+        layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy())
+                  for m in network_body.hidden if isinstance(m, nn.Linear)]
+    return normalizers, layers
+
+
+def body_forward(obs: list[np.ndarray], normalizers: list, layers: list) -> np.ndarray:
+    parts = []
+    for x, norm in zip(obs, normalizers):
+        x = np.asarray(x, dtype=np.float32)
+        if norm is not None:
+            x = np.clip((x - norm[0]) / norm[1], -5.0, 5.0)
+        parts.append(x)
+    h = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+    for weight, bias in layers:
+        h = h @ weight + bias
+        h = h / (1.0 + np.exp(-h))  # swish: x * sigmoid(x)
+    return h
+
+
+class NumpyCritic:
+    """The critic's forward pass in numpy (value estimates while processing trajectories),
+    refreshed from the torch critic whenever any of its tensors changed."""
+
+    def __init__(self, critic: Critic) -> None:
+        if not supports(critic):
+            raise ValueError("NumpyCritic handles vector observations only")
+        self.critic = critic
+        self._tracked = _Tracked(critic)
+
+    def __call__(self, obs: list[np.ndarray]) -> dict[str, np.ndarray]:
+        """Value estimates per reward signal, float32 [n] each."""
+        if self._tracked.stale():
+            self.normalizers, self.layers = body_arrays(self.critic.network_body)
+            with torch.no_grad():
+                self.heads = {name: (head.weight.detach().numpy().T.copy(), head.bias.detach().numpy().copy())
+                              for name, head in self.critic.value_heads.items()}
+        h = body_forward(obs, self.normalizers, self.layers)
+        return {name: (h @ weight + bias)[:, 0] for name, (weight, bias) in self.heads.items()}
 
 
 class NumpyActor:
@@ -30,30 +97,15 @@ class NumpyActor:
         if not supports(actor):
             raise ValueError("NumpyActor handles vector observations only")
         self.actor = actor
-        self._tensors = [t for t in list(actor.parameters()) + list(actor.buffers())]
-        self._key: tuple | None = None
+        self._tracked = _Tracked(actor)
 
     def _stale(self) -> bool:
-        key = tuple((id(t), t._version) for t in self._tensors)
-        if key != self._key:
-            self._key = key
-            return True
-        return False
+        return self._tracked.stale()
 
     def _refresh(self) -> None:
         actor = self.actor
+        self.normalizers, self.layers = body_arrays(actor.network_body)
         with torch.no_grad():
-            self.normalizers = []
-            for encoder in actor.network_body.observation_encoder.encoders:
-                norm = encoder.normalizer
-                if norm is None:
-                    self.normalizers.append(None)
-                else:
-                    std = torch.sqrt(norm.running_variance / norm.normalization_steps)
-                    self.normalizers.append((norm.running_mean.numpy().astype(np.float32).copy(),
-                                             std.numpy().astype(np.float32).copy()))
-            self.layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy())
-                           for m in actor.network_body.hidden if isinstance(m, nn.Linear)]
             self.mu = None
             if actor.mu is not None:
                 self.mu = (actor.mu.weight.detach().numpy().T.copy(), actor.mu.bias.detach().numpy().copy())
@@ -67,16 +119,7 @@ class NumpyActor:
         """mu [n, c] or None, and masked logits [n, k_b] per branch (allowed: float [n, sum], 1 = allowed)."""
         if self._stale():
             self._refresh()
-        parts = []
-        for x, norm in zip(obs, self.normalizers):
-            x = np.asarray(x, dtype=np.float32)
-            if norm is not None:
-                x = np.clip((x - norm[0]) / norm[1], -5.0, 5.0)
-            parts.append(x)
-        h = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
-        for weight, bias in self.layers:
-            h = h @ weight + bias
-            h = h / (1.0 + np.exp(-h))  # swish: x * sigmoid(x)
+        h = body_forward(obs, self.normalizers, self.layers)
         mu = h @ self.mu[0] + self.mu[1] if self.mu is not None else None
         logits = []
         for index, (weight, bias) in enumerate(self.branches):

@@ -12,8 +12,10 @@ import numpy as np
 import torch
 
 from trainer.errors import ConfigError
+from trainer.ppo import fast_actor
 from trainer.ppo.adam import Adam
 from trainer.ppo.buffer import Trajectory, UpdateBuffer
+from trainer.ppo.fast_actor import NumpyCritic
 from trainer.ppo.gae import gae
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
@@ -66,6 +68,9 @@ class PPOTrainer:
         self.shuffle_generator.manual_seed(seed + 3)
         self.buffer = UpdateBuffer()
         self.step = 0
+        # value estimates of vector-observation critics in numpy: no per-trajectory torch op overhead
+        self._numpy_critic = NumpyCritic(self.critic) if (
+            fast_actor.supports(self.critic) and self.device.type == "cpu") else None
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays: list[np.ndarray]) -> list[torch.Tensor]:
@@ -74,6 +79,10 @@ class PPOTrainer:
     def _value_estimates(self, traj: Trajectory) -> tuple[dict[str, np.ndarray], dict[str, float]]:
         """Current-critic values for obs [T] and next_obs, in one batch: (values [T] per signal, V(next))."""
         both = [np.concatenate([o, n[None]], axis=0) for o, n in zip(traj.obs, traj.next_obs)]
+        if self._numpy_critic is not None:
+            estimates = self._numpy_critic(both)
+            return ({name: v[:-1] for name, v in estimates.items()},
+                    {name: float(v[-1]) for name, v in estimates.items()})
         with torch.inference_mode():
             estimates = self.critic(self._tensors(both))
         values = {name: v[:-1].cpu().numpy() for name, v in estimates.items()}
