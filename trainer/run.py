@@ -94,6 +94,7 @@ class RunState:
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
     pending_reset: bool = False
     start_time: float = field(default_factory=time.time)
+    _last_progress: float = float("-inf")
 
     # ------------------------------------------------------------------ behaviors
     def ensure_runner(self, behavior_name: str, spec) -> BehaviorRunner:
@@ -251,6 +252,11 @@ class RunState:
         return all(r.done for r in self.runners.values())
 
     def report_progress(self) -> None:
+        """Feed the live progress line; at most every 0.1 s (it renders far less often)."""
+        now = time.monotonic()
+        if now - self._last_progress < 0.1:
+            return
+        self._last_progress = now
         for r in self.runners.values():
             rewards = r.reward_buffer
             self.progress.update(r.brain, r.trainer.step, r.max_steps,
