@@ -17,7 +17,9 @@ terminal infos are sent, pending rewards are dropped.
 """
 from __future__ import annotations
 
+import itertools
 import logging
+import operator
 from typing import Sequence
 
 import numpy as np
@@ -27,6 +29,8 @@ from unity_stub_env.agents import EncodedInfos, EpisodeIdCounter, encode_agent_i
 from unity_stub_env.tasks.base import Stat, Task
 
 logger = logging.getLogger("unity_stub_env")
+_CONTINUOUS = operator.attrgetter("continuous_actions")
+_DISCRETE = operator.attrgetter("discrete_actions")
 
 
 class ActionCountError(RuntimeError):
@@ -102,10 +106,10 @@ class Academy:
             )
         spec = self.task.action_spec
         if spec.continuous_size:
-            self.continuous[:] = _action_rows([a.continuous_actions for a in actions], spec.continuous_size,
+            self.continuous[:] = _action_rows(list(map(_CONTINUOUS, actions)), spec.continuous_size,
                                               "continuous", np.float32)
         if spec.discrete_branches:
-            self.discrete[:] = _action_rows([a.discrete_actions for a in actions], len(spec.discrete_branches),
+            self.discrete[:] = _action_rows(list(map(_DISCRETE, actions)), len(spec.discrete_branches),
                                             "discrete", np.int32)
 
     def advance(self) -> None:
@@ -145,10 +149,11 @@ class Academy:
 
 def _action_rows(rows: list, width: int, kind: str, dtype) -> np.ndarray:
     """[n, width] array from n repeated proto fields; raises ActionCountError on a bad width."""
-    widths = {len(row) for row in rows}
+    widths = set(map(len, rows))
     if widths != {width}:
         raise ActionCountError(
             f"The trainer sent {kind} actions of length(s) {sorted(widths)} but the action spec "
             f"has {width} {kind} action(s) per agent."
         )
-    return np.array([list(row) for row in rows], dtype=dtype)
+    flat = np.fromiter(itertools.chain.from_iterable(rows), dtype=dtype, count=len(rows) * width)
+    return flat.reshape(len(rows), width)

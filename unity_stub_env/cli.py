@@ -163,7 +163,7 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
             continue
         for academy, _ in academies:
             actions = rl_input.agent_actions.get(academy.behavior_key)
-            academy.apply_actions(list(actions.value) if actions is not None else [])
+            academy.apply_actions(actions.value if actions is not None else [])
             academy.advance()
 
 if __name__ == "__main__":

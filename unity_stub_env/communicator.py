@@ -198,7 +198,8 @@ class RpcCommunicator:
         ``brain_parameters`` is attached only the first time a behavior is sent with at least one
         agent info (as Unity does). Raises SessionEnd on a non-200 answer, QUIT or a lost trainer.
         """
-        output = unity_output_pb2.UnityOutputProto()
+        message = _wrap(None)
+        output = message.unity_output  # filled in place: no copy of the agent infos
         first_time = []
         for behavior_key, infos, brain_parameters in batches:
             entry = output.rl_output.agentInfos[behavior_key]
@@ -210,7 +211,7 @@ class RpcCommunicator:
                 output.rl_initialization_output.brain_parameters.append(brain_parameters)
                 first_time.append(behavior_key)
         output.rl_output.side_channel = side_channel
-        answer = self._exchange_raw(_wrap(output))
+        answer = self._exchange_raw(message)
         self._sent_brain_keys.update(first_time)
         return answer.unity_input.rl_input
 
