@@ -5,6 +5,7 @@ then ``update`` whenever ``ready_to_update`` says the buffer holds more than buf
 """
 from __future__ import annotations
 
+import os
 from itertools import chain
 from typing import Any
 
@@ -12,7 +13,7 @@ import numpy as np
 import torch
 
 from trainer.errors import ConfigError
-from trainer.ppo import fast_actor
+from trainer.ppo import fast_actor, numpy_update
 from trainer.ppo.adam import Adam
 from trainer.ppo.buffer import Trajectory, UpdateBuffer
 from trainer.ppo.fast_actor import NumpyCritic
@@ -68,6 +69,9 @@ class PPOTrainer:
         self.shuffle_generator.manual_seed(seed + 3)
         self.buffer = UpdateBuffer()
         self.step = 0
+        # minibatch steps in numpy for vector-observation networks on the CPU (numpy_update.py);
+        # MLAGENTS_LIKE_NUMPY_UPDATE=0 keeps autograd
+        self.numpy_update = os.environ.get("MLAGENTS_LIKE_NUMPY_UPDATE", "1") != "0"
         # value estimates of vector-observation critics in numpy: no per-trajectory torch op overhead
         self._numpy_critic = NumpyCritic(self.critic) if (
             fast_actor.supports(self.critic) and self.device.type == "cpu") else None
@@ -173,9 +177,12 @@ class PPOTrainer:
         learning_rate, beta, epsilon = self.current_schedule()
         for group in self.optimizer.param_groups:
             group["lr"] = learning_rate
-        data = self._buffer_tensors()
         length, batch_size = len(self.buffer), self.hyperparams.batch_size
         collected: dict[str, list[float]] = {}
+        if self.numpy_update and numpy_update.supports(self):
+            self._update_numpy(learning_rate, beta, epsilon, collected)
+            return self._finish_update(collected, learning_rate, beta, epsilon)
+        data = self._buffer_tensors()
         for _ in range(self.hyperparams.num_epoch):
             order = torch.randperm(length, generator=self.shuffle_generator).to(self.device)
             for start in range(0, (length // batch_size) * batch_size, batch_size):
@@ -186,6 +193,35 @@ class PPOTrainer:
                 self.optimizer.step()
                 for key, value in stats.items():
                     collected.setdefault(key, []).append(value)
+        return self._finish_update(collected, learning_rate, beta, epsilon)
+
+    def _update_numpy(self, learning_rate: float, beta: float, epsilon: float,
+                      collected: dict[str, list[float]]) -> None:
+        """The same minibatches (same shuffles) as the torch path, stepped by NumpyPPO."""
+        data = self.buffer.concatenated()
+        data["advantages"] = normalize_advantages(data["advantages"]).astype(np.float32)
+        masks = data.pop("action_masks")
+        if self.behavior_spec.action_spec.discrete_branches:
+            data["allowed"] = (~masks).astype(np.float32)
+        n_obs = len(self.behavior_spec.observation_specs)
+        obs = [data.pop(_obs_key(i)) for i in range(n_obs)]
+        stepper = numpy_update.NumpyPPO(self)
+        actor_in, critic_in = stepper.prepare(obs)
+        length, batch_size = len(self.buffer), self.hyperparams.batch_size
+        try:
+            for _ in range(self.hyperparams.num_epoch):
+                order = torch.randperm(length, generator=self.shuffle_generator).numpy()
+                for start in range(0, (length // batch_size) * batch_size, batch_size):
+                    index = order[start:start + batch_size]
+                    batch = {k: v[index] for k, v in data.items()}
+                    stats = stepper.step(batch, actor_in[index], critic_in[index], learning_rate, beta, epsilon)
+                    for key, value in stats.items():
+                        collected.setdefault(key, []).append(value)
+        finally:
+            stepper.finish()
+
+    def _finish_update(self, collected: dict[str, list[float]], learning_rate: float, beta: float,
+                       epsilon: float) -> dict[str, float]:
         self.buffer.clear()
         result = {key: float(np.mean(values)) for key, values in collected.items()}
         result.update({"Policy/Learning Rate": learning_rate, "Policy/Epsilon": epsilon, "Policy/Beta": beta})
