@@ -7,6 +7,7 @@ import pytest
 
 from protos.communicator_objects import unity_rl_output_pb2
 from trainer.protocol import wire
+from unity_stub_env import agents
 from unity_stub_env.agents import build_agent_infos, encode_agent_infos
 from unity_stub_env.tasks import make_task
 
@@ -32,7 +33,9 @@ def test_repeated_messages_prefix_each_row():
 
 @pytest.mark.parametrize("task_name,areas", [("basic", 3), ("ball3d", 1)])
 @pytest.mark.parametrize("done", [False, True])
-def test_encoded_infos_equal_protobufs_own_encoding(task_name, areas, done):
+@pytest.mark.parametrize("small_batch", [0, 10_000], ids=["byte-matrix", "per-agent"])
+def test_encoded_infos_equal_protobufs_own_encoding(task_name, areas, done, small_batch, monkeypatch):
+    monkeypatch.setattr(agents, "SMALL_BATCH", small_batch)  # force one of the two encoders
     task = make_task(task_name, num_areas=areas, seed=0)
     task.reset()
     n = task.num_agents

@@ -370,7 +370,8 @@ def fill_rl_input(
         continuous, discrete = _as_action_matrices(action)
         if len(continuous) == 0:
             continue
-        encoded = encode_agent_actions(continuous, discrete)
+        # a byte matrix pays off from a few agents on; below that a loop is cheaper
+        encoded = encode_agent_actions(continuous, discrete) if len(continuous) >= 8 else None
         if encoded is not None:
             rl_input.agent_actions[behavior_name].MergeFromString(encoded)
         else:

@@ -73,8 +73,9 @@ class BasicTask(Task):
 
     def step(self, continuous: np.ndarray, discrete: np.ndarray) -> TaskStep:
         """discrete int [n, 1] in {0, 1, 2} -> one corridor step for every agent."""
-        choice = np.clip(np.asarray(discrete, dtype=np.int64).reshape(self.num_agents, -1)[:, 0], 0, 2)
-        self.position = np.clip(self.position + _MOVE_OF_ACTION[choice], 0, NUM_POSITIONS - 1)
+        # np.minimum/np.maximum: np.clip's Python wrapper costs more than this whole step
+        choice = np.minimum(np.maximum(np.asarray(discrete, dtype=np.int64).reshape(self.num_agents, -1)[:, 0], 0), 2)
+        self.position = np.minimum(np.maximum(self.position + _MOVE_OF_ACTION[choice], 0), NUM_POSITIONS - 1)
         self.episode_step += 1
         small = self.position == SMALL_GOAL
         large = self.position == LARGE_GOAL
