@@ -277,19 +277,7 @@ def _stack_float_data(
 
 @functools.lru_cache(maxsize=256)
 def _float_data_header(byte_length: int) -> bytes:
-    return b"\x0a" + _varint(byte_length)
-
-
-def _varint(value: int) -> bytes:
-    out = bytearray()
-    while True:
-        byte = value & 0x7F
-        value >>= 7
-        if value:
-            out.append(byte | 0x80)
-        else:
-            out.append(byte)
-            return bytes(out)
+    return wire.len_prefix(1, byte_length)
 
 
 def _stack_visual(
