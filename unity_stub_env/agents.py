@@ -87,6 +87,13 @@ def encode_agent_infos(
 SMALL_BATCH = 8  # below this, numpy's per-call overhead costs more than a loop over agents
 
 
+def _varint5(value: int) -> bytes:
+    """``wire.varint5_columns`` for one id (0 <= value < 2**32)."""
+    if not 0 <= value < 1 << 32:
+        raise ValueError("fixed-width varints hold 0 <= value < 2**32")
+    return bytes(((value >> 7 * i) & 0x7F) | (0x80 if i < 4 else 0) for i in range(5))
+
+
 @functools.lru_cache(maxsize=64)
 def _observation_frame(spec: ObservationSpec) -> tuple[bytes, bytes]:
     """The bytes of one ObservationProto field (13) before and after its float payload."""
@@ -115,7 +122,7 @@ def _encode_few(observation_specs, observations, rewards, episode_ids, done, int
              else [False] * count)
     masks = (np.asarray(action_mask, dtype=bool).reshape(count, -1).astype(np.uint8) if action_mask is not None
              else None)
-    ids = wire.varint5_columns(episode_ids).tobytes()
+    ids = b"".join(map(_varint5, np.asarray(episode_ids).tolist()))
     done_field = b"\x40\x01" if done else b"\x40\x00"
     records = []
     for row in range(count):
