@@ -347,8 +347,8 @@ class _Connection:
             raise Http2Error(f"undecodable header block ({error})", 0x9) from None
 
     def _data(self, flags: int, stream_id: int, payload: bytes, calls: list) -> None:
+        self.recv_unacked += len(payload)  # flow control counts the whole frame, padding included
         payload = _strip_padding(flags, payload) if flags & PADDED else payload
-        self.recv_unacked += len(payload)
         if self.recv_unacked > MAX_WINDOW // 2:
             self.out += frame(WINDOW_UPDATE, 0, 0, struct.pack(">I", self.recv_unacked))
             self.recv_unacked = 0
