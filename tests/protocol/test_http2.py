@@ -240,3 +240,32 @@ def test_agent_actions_bytes_equal_the_one_message_at_a_time_encoding():
         assert fast.SerializeToString() == slow.SerializeToString() and len(fast.value) == 5
     # a discrete action that needs a 2-byte varint takes the message-by-message path
     assert codec.encode_agent_actions(np.zeros((1, 0), np.float32), np.array([[200]], np.int32)) is None
+
+
+def test_endless_header_blocks_close_the_connection_instead_of_growing():
+    transport = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, 1 << 20)
+    transport.start()
+    try:
+        with socket.create_connection(("127.0.0.1", transport.port), timeout=5) as sock:
+            chunk = http2.frame(http2.CONTINUATION, 0, 1, b"\x00" * 65536)
+            sock.sendall(http2.PREFACE + http2.frame(http2.HEADERS, 0, 1, b"\x00" * 65536))
+            received = b""
+            for _ in range(20):  # 20 x 64 KiB > the 1 MiB limit
+                try:
+                    sock.sendall(chunk)
+                except OSError:
+                    break
+                transport.take(0.0)
+            transport.take(0.2)
+            try:
+                while True:
+                    data = sock.recv(65536)
+                    if not data:
+                        break
+                    received += data
+            except OSError:
+                pass
+        assert b"header block larger than" in received  # in the GOAWAY's debug data
+        assert transport._connections == {}
+    finally:
+        transport.close(grace=0.2)

@@ -51,6 +51,7 @@ MAX_WINDOW = (1 << 31) - 1
 DEFAULT_WINDOW = 65535
 OUR_MAX_FRAME = (1 << 24) - 1  # the largest allowed: big observations arrive in few frames
 _RECV_BYTES = 1 << 20
+MAX_HEADER_BLOCK = 1 << 20  # a gRPC request's headers are a few hundred bytes
 _SEND_TIMEOUT_S = 30.0
 
 
@@ -261,12 +262,14 @@ class _Connection:
                 payload = payload[5:]
             self.header_stream, self.header_flags = stream_id, flags
             self.header_block = bytearray(payload)
+            self._check_header_size()
             if flags & END_HEADERS:
                 self._headers_done(calls)
         elif kind == CONTINUATION:
             if stream_id != self.header_stream:
                 raise Http2Error("CONTINUATION for another stream")
             self.header_block += payload
+            self._check_header_size()
             if flags & END_HEADERS:
                 self._headers_done(calls)
         elif kind == SETTINGS:
@@ -293,6 +296,10 @@ class _Connection:
         elif kind == PUSH_PROMISE:
             raise Http2Error("a client may not send PUSH_PROMISE")
         # PRIORITY and unknown frame types are ignored (RFC 9113 §5.5)
+
+    def _check_header_size(self) -> None:
+        if len(self.header_block) > MAX_HEADER_BLOCK:
+            raise Http2Error(f"header block larger than {MAX_HEADER_BLOCK} bytes")
 
     def _settings(self, payload: bytes) -> None:
         if len(payload) % 6:
