@@ -13,11 +13,15 @@ import numpy as np
 from protos.communicator_objects import (
     agent_info_pb2,
     brain_parameters_pb2,
-    observation_pb2,
     space_type_pb2,
 )
 from trainer.protocol import wire
 from trainer.protocol.types import ActionSpec, ObservationSpec
+
+
+# AgentInfoProto field tags (spec §2): reward 7 (float), done 8, max_step_reached 9, id 10 (varints)
+_REWARD, _DONE, _MAX_STEP, _ID = (wire.tag(7, wire.I32), wire.tag(8, wire.VARINT),
+                                  wire.tag(9, wire.VARINT), wire.tag(10, wire.VARINT))
 
 
 class EncodedInfos:
@@ -55,7 +59,7 @@ def encode_agent_infos(
     interrupted: np.ndarray | None = None,
     action_mask: np.ndarray | None = None,
 ) -> EncodedInfos:
-    """The AgentInfoProtos ``build_agent_infos`` makes, serialized for all rows at once.
+    """AgentInfoProtos as Unity's ``PutObservations`` writes them, serialized for all rows at once.
 
     Every agent's record has the same layout: reward (7), done (8), max_step_reached (9), the
     action mask (11, packed), one ObservationProto per sensor (13: shape, float_data,
@@ -65,11 +69,10 @@ def encode_agent_infos(
     count = len(episode_ids)
     if count == 0:
         return EncodedInfos()
-    if count <= SMALL_BATCH:
+    if count < wire.MIN_MATRIX_ROWS:
         return _encode_few(observation_specs, observations, rewards, episode_ids, done, interrupted, action_mask)
-    parts: list = [wire.tag(7, wire.I32), wire.float_columns(rewards, count),
-                   wire.tag(8, wire.VARINT) + (b"\x01" if done else b"\x00"),
-                   wire.tag(9, wire.VARINT)]
+    parts: list = [_REWARD, wire.float_columns(rewards, count), _DONE + (b"\x01" if done else b"\x00"),
+                   _MAX_STEP]
     flags = np.zeros((count, 1), dtype=np.uint8)
     if done and interrupted is not None:
         flags[:, 0] = np.asarray(interrupted, dtype=bool)
@@ -80,11 +83,8 @@ def encode_agent_infos(
     for spec, obs in zip(observation_specs, observations):
         head, tail = _observation_frame(spec)
         parts += [head, wire.float_columns(obs, count), tail]
-    parts += [wire.tag(10, wire.VARINT), wire.varint5_columns(episode_ids)]
+    parts += [_ID, wire.varint5_columns(episode_ids)]
     return EncodedInfos(wire.repeated_messages(1, wire.rows(parts, count)), count)
-
-
-SMALL_BATCH = 8  # below this, numpy's per-call overhead costs more than a loop over agents
 
 
 def _varint5(value: int) -> bytes:
@@ -123,15 +123,15 @@ def _encode_few(observation_specs, observations, rewards, episode_ids, done, int
     masks = (np.asarray(action_mask, dtype=bool).reshape(count, -1).astype(np.uint8) if action_mask is not None
              else None)
     ids = b"".join(map(_varint5, np.asarray(episode_ids).tolist()))
-    done_field = b"\x40\x01" if done else b"\x40\x00"
+    done_field = _DONE + (b"\x01" if done else b"\x00")
     records = []
     for row in range(count):
-        parts = [b"\x3d", reward_bytes[4 * row:4 * row + 4], done_field, b"\x48\x01" if flags[row] else b"\x48\x00"]
+        parts = [_REWARD, reward_bytes[4 * row:4 * row + 4], done_field, _MAX_STEP + (b"\x01" if flags[row] else b"\x00")]
         if masks is not None:
             parts += [wire.len_prefix(11, masks.shape[1]), masks[row].tobytes()]
         for (head, tail), obs in zip(frames, flat_obs):
             parts += [head, obs[row].tobytes(), tail]
-        parts += [b"\x50", ids[5 * row:5 * row + 5]]
+        parts += [_ID, ids[5 * row:5 * row + 5]]
         content = b"".join(parts)
         records.append(wire.len_prefix(1, len(content)) + content)
     return EncodedInfos(b"".join(records), count)
@@ -148,50 +148,6 @@ class EpisodeIdCounter:
         ids = np.arange(self._next, self._next + count, dtype=np.int64)
         self._next += count
         return ids
-
-
-def build_agent_infos(
-    observation_specs: Sequence[ObservationSpec],
-    observations: Sequence[np.ndarray],
-    rewards: np.ndarray,
-    episode_ids: np.ndarray,
-    done: bool,
-    interrupted: np.ndarray | None = None,
-    action_mask: np.ndarray | None = None,
-) -> list[agent_info_pb2.AgentInfoProto]:
-    """One AgentInfoProto per row, as Unity's ``PutObservations`` would write them.
-
-    observations[i]: float32 [k, *observation_specs[i].shape]; rewards float32 [k];
-    episode_ids int [k]; interrupted bool [k] (max_step_reached, only with done);
-    action_mask bool [k, sum(branches)] with True = forbidden, or None.
-    """
-    count = len(episode_ids)
-    flat_obs = [np.asarray(obs, dtype=np.float32).reshape(count, -1).tolist() for obs in observations]
-    reward_list = np.asarray(rewards, dtype=np.float32).tolist()
-    id_list = np.asarray(episode_ids).tolist()
-    interrupted_list = (np.asarray(interrupted, dtype=bool).tolist() if interrupted is not None
-                        else [False] * count)
-    mask_list = np.asarray(action_mask, dtype=bool).tolist() if action_mask is not None else None
-    spec_fields = [(list(spec.shape), [int(p) for p in spec.dimension_property],
-                    int(spec.observation_type), spec.name) for spec in observation_specs]
-    infos = []
-    for row in range(count):
-        info = agent_info_pb2.AgentInfoProto(
-            reward=reward_list[row], done=done, max_step_reached=done and interrupted_list[row],
-            id=id_list[row],
-        )
-        if mask_list is not None:
-            info.action_mask.extend(mask_list[row])
-        for sensor, (shape, props, obs_type, name) in enumerate(spec_fields):
-            obs = info.observations.add()
-            obs.shape.extend(shape)
-            obs.compression_type = observation_pb2.NONE
-            obs.float_data.data.extend(flat_obs[sensor][row])
-            obs.dimension_properties.extend(props)
-            obs.observation_type = obs_type
-            obs.name = name
-        infos.append(info)
-    return infos
 
 
 def build_brain_parameters(behavior_key: str, action_spec: ActionSpec) -> brain_parameters_pb2.BrainParametersProto:

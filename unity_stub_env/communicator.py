@@ -29,7 +29,6 @@ from protos.communicator_objects import (
 from trainer.protocol import side_channels as sc
 from trainer.protocol.codec import all_true_capabilities
 from trainer.protocol.http2 import CallError, Http2Channel
-from unity_stub_env.agents import EncodedInfos
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
 logger = logging.getLogger("unity_stub_env")
@@ -187,13 +186,8 @@ class RpcCommunicator:
         return init_input, second.unity_input.rl_input
 
     # Regular exchanges -----------------------------------------------------------------------
-    def exchange(self, behavior_key: str, infos: list, brain_parameters, side_channel: bytes):
-        """Send one step's agent infos of one behavior; returns the trainer's ``rl_input``."""
-        return self.exchange_many([(behavior_key, infos, brain_parameters)], side_channel)
-
     def exchange_many(self, batches: list, side_channel: bytes):
-        """Send one step's agent infos of every behavior, ``[(behavior_key, infos, brain_parameters)]``
-        (``infos``: AgentInfoProtos or ``EncodedInfos``).
+        """Send one step's agent infos of every behavior, ``[(behavior_key, EncodedInfos, brain_parameters)]``.
 
         ``brain_parameters`` is attached only the first time a behavior is sent with at least one
         agent info (as Unity does). Raises SessionEnd on a non-200 answer, QUIT or a lost trainer.
@@ -202,11 +196,8 @@ class RpcCommunicator:
         output = message.unity_output  # filled in place: no copy of the agent infos
         first_time = []
         for behavior_key, infos, brain_parameters in batches:
-            entry = output.rl_output.agentInfos[behavior_key]
-            if isinstance(infos, EncodedInfos):
-                entry.MergeFromString(infos.data)  # protobuf's C parser; re-serialized canonically
-            else:
-                entry.value.extend(infos)
+            # protobuf's C parser; the message is re-serialized canonically when sent
+            output.rl_output.agentInfos[behavior_key].MergeFromString(infos.data)
             if behavior_key not in self._sent_brain_keys and len(infos) > 0:
                 output.rl_initialization_output.brain_parameters.append(brain_parameters)
                 first_time.append(behavior_key)

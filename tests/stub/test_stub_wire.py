@@ -2,16 +2,62 @@
 encoding, and the fixed-width wire helpers against hand-computed bytes."""
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 import pytest
 
-from protos.communicator_objects import unity_rl_output_pb2
+from protos.communicator_objects import agent_info_pb2, observation_pb2, unity_rl_output_pb2
 from trainer.protocol import wire
-from unity_stub_env import agents
-from unity_stub_env.agents import build_agent_infos, encode_agent_infos
+from trainer.protocol.types import ObservationSpec
+from unity_stub_env.agents import encode_agent_infos
 from unity_stub_env.tasks import make_task
 
 ListAgentInfo = unity_rl_output_pb2.UnityRLOutputProto.ListAgentInfoProto
+
+
+def build_agent_infos(
+    observation_specs: Sequence[ObservationSpec],
+    observations: Sequence[np.ndarray],
+    rewards: np.ndarray,
+    episode_ids: np.ndarray,
+    done: bool,
+    interrupted: np.ndarray | None = None,
+    action_mask: np.ndarray | None = None,
+) -> list[agent_info_pb2.AgentInfoProto]:
+    """The oracle: one AgentInfoProto object per row, as Unity's ``PutObservations`` writes them.
+
+    observations[i]: float32 [k, *observation_specs[i].shape]; rewards float32 [k];
+    episode_ids int [k]; interrupted bool [k] (max_step_reached, only with done);
+    action_mask bool [k, sum(branches)] with True = forbidden, or None.
+    """
+    count = len(episode_ids)
+    flat_obs = [np.asarray(obs, dtype=np.float32).reshape(count, -1).tolist() for obs in observations]
+    reward_list = np.asarray(rewards, dtype=np.float32).tolist()
+    id_list = np.asarray(episode_ids).tolist()
+    interrupted_list = (np.asarray(interrupted, dtype=bool).tolist() if interrupted is not None
+                        else [False] * count)
+    mask_list = np.asarray(action_mask, dtype=bool).tolist() if action_mask is not None else None
+    spec_fields = [(list(spec.shape), [int(p) for p in spec.dimension_property],
+                    int(spec.observation_type), spec.name) for spec in observation_specs]
+    infos = []
+    for row in range(count):
+        info = agent_info_pb2.AgentInfoProto(
+            reward=reward_list[row], done=done, max_step_reached=done and interrupted_list[row],
+            id=id_list[row],
+        )
+        if mask_list is not None:
+            info.action_mask.extend(mask_list[row])
+        for sensor, (shape, props, obs_type, name) in enumerate(spec_fields):
+            obs = info.observations.add()
+            obs.shape.extend(shape)
+            obs.compression_type = observation_pb2.NONE
+            obs.float_data.data.extend(flat_obs[sensor][row])
+            obs.dimension_properties.extend(props)
+            obs.observation_type = obs_type
+            obs.name = name
+        infos.append(info)
+    return infos
 
 
 def test_varints_and_fixed_width_varints_by_hand():
@@ -35,7 +81,7 @@ def test_repeated_messages_prefix_each_row():
 @pytest.mark.parametrize("done", [False, True])
 @pytest.mark.parametrize("small_batch", [0, 10_000], ids=["byte-matrix", "per-agent"])
 def test_encoded_infos_equal_protobufs_own_encoding(task_name, areas, done, small_batch, monkeypatch):
-    monkeypatch.setattr(agents, "SMALL_BATCH", small_batch)  # force one of the two encoders
+    monkeypatch.setattr(wire, "MIN_MATRIX_ROWS", small_batch)  # force one of the two encoders
     task = make_task(task_name, num_areas=areas, seed=0)
     task.reset()
     n = task.num_agents

@@ -358,8 +358,7 @@ def fill_rl_input(
         continuous, discrete = _as_action_matrices(action)
         if len(continuous) == 0:
             continue
-        # a byte matrix pays off from a few agents on; below that a loop is cheaper
-        encoded = encode_agent_actions(continuous, discrete) if len(continuous) >= 8 else None
+        encoded = encode_agent_actions(continuous, discrete) if len(continuous) >= wire.MIN_MATRIX_ROWS else None
         if encoded is not None:
             rl_input.agent_actions[behavior_name].MergeFromString(encoded)
         else:

@@ -21,6 +21,7 @@ import numpy as np
 Part = Union[bytes, np.ndarray]  # constant bytes, or a uint8 [n, width] column block
 
 VARINT, I64, LEN, I32 = 0, 1, 2, 5
+MIN_MATRIX_ROWS = 8  # below this many records numpy's per-call cost loses to a plain loop
 
 
 def varint(value: int) -> bytes:
