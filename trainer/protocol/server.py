@@ -174,6 +174,9 @@ class _GrpcioTransport:
                 self._cond.notify_all()
 
     # ---- trainer side
+    def poll(self) -> None:
+        """Nothing to do: grpcio's threads notice a cancelled call on their own."""
+
     def take(self, timeout: float) -> _PendingCall | None:
         """The next incoming call, or None after ``timeout`` s or once the client is gone."""
         with self._cond:
@@ -277,8 +280,7 @@ class UnityEndpoint:
         """The simulator dropped a call before it was answered (crash, cancel)."""
         if self._transport is None:
             return False
-        if isinstance(self._transport, Http2Transport):
-            self._transport.poll()  # nothing reads the sockets between our calls
+        self._transport.poll()
         return self._transport.client_gone
 
     def __enter__(self) -> "UnityEndpoint":
