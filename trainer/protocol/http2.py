@@ -67,6 +67,27 @@ def frame(kind: int, flags: int, stream_id: int, payload: bytes = b"") -> bytes:
     return struct.pack(">I", len(payload))[1:] + bytes((kind, flags)) + struct.pack(">I", stream_id) + payload
 
 
+def take_frames(buffer: bytearray) -> list[tuple[int, int, int, bytes]]:
+    """Remove the complete frames at the front of ``buffer``: [(type, flags, stream id, payload)].
+
+    Raises Http2Error for a frame longer than we ever allow (both ends advertise OUR_MAX_FRAME).
+    """
+    frames = []
+    position, size = 0, len(buffer)
+    while size - position >= 9:
+        length = (buffer[position] << 16) | (buffer[position + 1] << 8) | buffer[position + 2]
+        if length > OUR_MAX_FRAME:
+            raise Http2Error(f"frame of {length} bytes exceeds the maximum", FRAME_SIZE_ERROR)
+        end = position + 9 + length
+        if end > size:
+            break
+        stream_id = struct.unpack_from(">I", buffer, position + 5)[0] & 0x7FFFFFFF
+        frames.append((buffer[position + 3], buffer[position + 4], stream_id, bytes(buffer[position + 9:end])))
+        position = end
+    del buffer[:position]
+    return frames
+
+
 def hpack_int(value: int, prefix_bits: int, first: int = 0) -> bytes:
     """HPACK integer (RFC 7541 §5.1) with ``first``'s high bits above the prefix."""
     limit = (1 << prefix_bits) - 1
@@ -231,21 +252,8 @@ class _Connection:
                 raise Http2Error(self._not_http2())
             del buffer[: len(PREFACE)]
             self.preface_seen = True
-        position = 0
-        size = len(buffer)
-        while size - position >= 9:
-            length = (buffer[position] << 16) | (buffer[position + 1] << 8) | buffer[position + 2]
-            if length > OUR_MAX_FRAME:
-                raise Http2Error(f"frame of {length} bytes exceeds the maximum", FRAME_SIZE_ERROR)
-            end = position + 9 + length
-            if end > size:
-                break
-            kind, flags = buffer[position + 3], buffer[position + 4]
-            stream_id = struct.unpack_from(">I", buffer, position + 5)[0] & 0x7FFFFFFF
-            payload = bytes(buffer[position + 9 : end])
-            position = end
+        for kind, flags, stream_id, payload in take_frames(buffer):
             self._frame(kind, flags, stream_id, payload, calls)
-        del buffer[:position]
 
     def _not_http2(self) -> str:
         return ("the client did not start with the HTTP/2 preface; only gRPC clients (a Unity "
@@ -727,6 +735,9 @@ class Http2Channel:
         except OSError as error:
             self.close()
             raise CallError("UNAVAILABLE", str(error)) from None
+        except Http2Error as error:
+            self.close()
+            raise CallError("INTERNAL", f"the server broke HTTP/2: {error}") from None
         finally:
             if self.sock is not None:
                 self.sock.settimeout(None)
@@ -753,19 +764,11 @@ class Http2Channel:
                 return
 
     def _parse(self, stream_id: int, response: dict | None) -> bool:
-        buffer, position, ended, out = self._buffer, 0, False, bytearray()
-        while len(buffer) - position >= 9:
-            length = (buffer[position] << 16) | (buffer[position + 1] << 8) | buffer[position + 2]
-            end = position + 9 + length
-            if end > len(buffer):
-                break
-            kind, flags = buffer[position + 3], buffer[position + 4]
-            sid = struct.unpack_from(">I", buffer, position + 5)[0] & 0x7FFFFFFF
-            payload = bytes(buffer[position + 9 : end])
-            position = end
+        ended, out = False, bytearray()
+        for kind, flags, sid, payload in take_frames(self._buffer):
             if kind == DATA:
+                self._recv_unacked += len(payload)  # flow control counts padding too
                 payload = _strip_padding(flags, payload)
-                self._recv_unacked += length
                 if self._recv_unacked > MAX_WINDOW // 2:
                     out += frame(WINDOW_UPDATE, 0, 0, struct.pack(">I", self._recv_unacked))
                     self._recv_unacked = 0
@@ -817,7 +820,6 @@ class Http2Channel:
                 self._goaway_last = struct.unpack(">I", payload[:4])[0] & 0x7FFFFFFF
                 if stream_id > self._goaway_last and response is not None:
                     raise CallError("UNAVAILABLE", "the server went away before taking the call")
-        del buffer[:position]
         if out:
             self._send(bytes(out))
         return ended
