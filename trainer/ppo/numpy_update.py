@@ -80,7 +80,6 @@ class NumpyPPO:
     ``finish`` at the end (bumps the torch version counters)."""
 
     def __init__(self, trainer) -> None:
-        self.trainer = trainer
         actor, critic = trainer.policy.actor, trainer.critic
         self.actor, self.critic = actor, critic
         self.actor_body, self.critic_body = _Body(actor.network_body), _Body(critic.network_body)

@@ -177,23 +177,28 @@ class PPOTrainer:
         learning_rate, beta, epsilon = self.current_schedule()
         for group in self.optimizer.param_groups:
             group["lr"] = learning_rate
-        length, batch_size = len(self.buffer), self.hyperparams.batch_size
         collected: dict[str, list[float]] = {}
         if self.numpy_update and numpy_update.supports(self):
             self._update_numpy(learning_rate, beta, epsilon, collected)
             return self._finish_update(collected, learning_rate, beta, epsilon)
         data = self._buffer_tensors()
-        for _ in range(self.hyperparams.num_epoch):
-            order = torch.randperm(length, generator=self.shuffle_generator).to(self.device)
-            for start in range(0, (length // batch_size) * batch_size, batch_size):
-                index = order[start:start + batch_size]
-                loss, stats = self._minibatch_loss({k: v[index] for k, v in data.items()}, beta, epsilon)
-                self.optimizer.zero_grad()
-                loss.backward()
-                self.optimizer.step()
-                for key, value in stats.items():
-                    collected.setdefault(key, []).append(value)
+        for order in self._minibatch_indices():
+            index = order.to(self.device)
+            loss, stats = self._minibatch_loss({k: v[index] for k, v in data.items()}, beta, epsilon)
+            self.optimizer.zero_grad()
+            loss.backward()
+            self.optimizer.step()
+            for key, value in stats.items():
+                collected.setdefault(key, []).append(value)
         return self._finish_update(collected, learning_rate, beta, epsilon)
+
+    def _minibatch_indices(self):
+        """num_epoch shuffles of the buffer (the seeded shuffle generator), cut into full minibatches."""
+        length, batch_size = len(self.buffer), self.hyperparams.batch_size
+        for _ in range(self.hyperparams.num_epoch):
+            order = torch.randperm(length, generator=self.shuffle_generator)
+            for start in range(0, (length // batch_size) * batch_size, batch_size):
+                yield order[start:start + batch_size]
 
     def _update_numpy(self, learning_rate: float, beta: float, epsilon: float,
                       collected: dict[str, list[float]]) -> None:
@@ -207,16 +212,13 @@ class PPOTrainer:
         obs = [data.pop(_obs_key(i)) for i in range(n_obs)]
         stepper = numpy_update.NumpyPPO(self)
         actor_in, critic_in = stepper.prepare(obs)
-        length, batch_size = len(self.buffer), self.hyperparams.batch_size
         try:
-            for _ in range(self.hyperparams.num_epoch):
-                order = torch.randperm(length, generator=self.shuffle_generator).numpy()
-                for start in range(0, (length // batch_size) * batch_size, batch_size):
-                    index = order[start:start + batch_size]
-                    batch = {k: v[index] for k, v in data.items()}
-                    stats = stepper.step(batch, actor_in[index], critic_in[index], learning_rate, beta, epsilon)
-                    for key, value in stats.items():
-                        collected.setdefault(key, []).append(value)
+            for order in self._minibatch_indices():
+                index = order.numpy()
+                batch = {k: v[index] for k, v in data.items()}
+                stats = stepper.step(batch, actor_in[index], critic_in[index], learning_rate, beta, epsilon)
+                for key, value in stats.items():
+                    collected.setdefault(key, []).append(value)
         finally:
             stepper.finish()
 
