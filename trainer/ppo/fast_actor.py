@@ -57,14 +57,19 @@ def body_arrays(network_body) -> tuple[list, list]:
     return normalizers, layers
 
 
-def body_forward(obs: list[np.ndarray], normalizers: list, layers: list) -> np.ndarray:
+def body_input(obs: list[np.ndarray], normalizers: list) -> np.ndarray:
+    """The hidden layers' input: each observation normalised and clipped, then concatenated."""
     parts = []
     for x, norm in zip(obs, normalizers):
         x = np.asarray(x, dtype=np.float32)
         if norm is not None:
-            x = np.clip((x - norm[0]) / norm[1], -5.0, 5.0)
+            x = np.clip((x - norm[0]) / norm[1], -5.0, 5.0).astype(np.float32, copy=False)
         parts.append(x)
-    h = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+
+
+def body_forward(obs: list[np.ndarray], normalizers: list, layers: list) -> np.ndarray:
+    h = body_input(obs, normalizers)
     for weight, bias in layers:
         h = h @ weight + bias
         h = h / (1.0 + np.exp(-h))  # swish: x * sigmoid(x)

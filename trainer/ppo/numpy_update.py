@@ -42,13 +42,7 @@ def supports(trainer) -> bool:
 def _normalized(network_body, obs: list[np.ndarray]) -> np.ndarray:
     """The body's input (normalised, clipped, concatenated) for the whole buffer at once."""
     normalizers, _ = fast_actor.body_arrays(network_body)
-    parts = []
-    for x, norm in zip(obs, normalizers):
-        x = np.asarray(x, dtype=np.float32)
-        if norm is not None:
-            x = np.clip((x - norm[0]) / norm[1], -5.0, 5.0)
-        parts.append(x.astype(np.float32, copy=False))
-    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+    return fast_actor.body_input(obs, normalizers)
 
 
 class _Body:
