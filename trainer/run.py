@@ -2,11 +2,12 @@
 
 Per iteration (each simulator has just sent its message):
   1. new behaviors get a ``BehaviorRunner`` (trainer, checkpoint bookkeeping);
-  2. every agent's experience is assembled (rollout.AgentTracker) and ONE batched forward pass per
-     behavior computes actions for all deciding agents across all envs;
+  2. ONE batched forward pass per behavior computes actions for all deciding agents across all
+     envs;
   3. the actions go out at once, so the simulators step while we work;
-  4. meanwhile trajectories go to PPO (GAE, update when the buffer is full), summaries, checkpoints,
-     curriculum; then we wait for the simulators' next messages.
+  4. meanwhile every agent's experience is assembled (rollout.AgentTracker), trajectories go to
+     PPO (GAE, update when the buffer is full), summaries, checkpoints, curriculum; then we wait
+     for the simulators' next messages.
 """
 from __future__ import annotations
 
@@ -121,55 +122,71 @@ class RunState:
         return runner
 
     # ------------------------------------------------------------------ decisions
-    def decide(self, results: list[StepResult], trajectories: list) -> list[dict[str, ActionTuple]]:
-        """Assemble experience for every agent and compute all actions, one forward pass per behavior."""
+    def decide(self, results: list[StepResult]) -> tuple[list[dict[str, ActionTuple]], list]:
+        """Actions for every deciding agent: ONE forward pass per behavior across all envs.
+
+        Returns (actions per env, the decisions to ``record`` once the actions are sent). Nothing
+        here touches the experience trackers, so the simulators wait only for the policy.
+        """
         actions: list[dict[str, ActionTuple]] = [{} for _ in results]
+        decided: list = []
         by_behavior: dict[str, list[int]] = {}
         for env_id, res in enumerate(results):
             for behavior in res.steps:
                 by_behavior.setdefault(behavior, []).append(env_id)
         specs = self.pool.behavior_specs() if by_behavior else {}
         for behavior, env_ids in by_behavior.items():
-            spec = specs[behavior]
-            runner = self.ensure_runner(behavior, spec)
+            runner = self.ensure_runner(behavior, specs[behavior])
+            steps = [(env_id, *results[env_id].steps[behavior]) for env_id in env_ids]
+            deciding = [decision for _, decision, _ in steps if len(decision)]
+            out = masks = None
+            if deciding:
+                out, masks = self._act(runner, deciding)
+                start = 0
+                for env_id, decision, _ in steps:
+                    if len(decision):
+                        end = start + len(decision)
+                        actions[env_id][behavior] = ActionTuple(out.env_actions.continuous[start:end],
+                                                                out.env_actions.discrete[start:end])
+                        start = end
+            decided.append((runner, behavior, steps, out, masks))
+        return actions, decided
+
+    def _act(self, runner: BehaviorRunner, deciding: list):
+        spec = runner.spec
+        branches = spec.action_spec.discrete_branches
+        if len(deciding) == 1:
+            obs = deciding[0].obs
+            masks = concat_masks(deciding[0], branches)
+        else:
+            obs = [np.concatenate([d.obs[i] for d in deciding]) for i in range(len(spec.observation_specs))]
+            ms = [concat_masks(d, branches) for d in deciding]
+            masks = None if ms[0] is None else np.concatenate(ms)
+        with self.timers.scope("policy.act"):
+            out = runner.trainer.policy.act(obs, masks, deterministic=runner.settings.network_settings.deterministic)
+        return out, masks
+
+    def record(self, decided: list, trajectories: list) -> None:
+        """Experience assembly for the decisions of ``decide`` (after their actions went out):
+        rewards paired with the previous actions, finished trajectories appended to
+        ``trajectories``, the new observations and actions remembered, episode statistics."""
+        for runner, behavior, steps, out, masks in decided:
             emit = lambda t, r=runner: trajectories.append((r, t))  # noqa: E731
-            deciding = []
-            for env_id in env_ids:
-                decision, terminal = results[env_id].steps[behavior]
+            start = 0
+            for env_id, decision, terminal in steps:
                 tracker = self.trackers.get((env_id, behavior))
                 if tracker is None:
-                    tracker = AgentTracker(spec, runner.settings.time_horizon)
+                    tracker = AgentTracker(runner.spec, runner.settings.time_horizon)
                     self.trackers[(env_id, behavior)] = tracker
                 tracker.on_terminal(terminal, emit)
                 slots = tracker.on_decision(decision, emit)
                 runner.add_episodes(tracker.episodes.rewards)
                 self._episode_stats(runner.brain, tracker)
                 if len(decision):
-                    deciding.append((env_id, tracker, slots, decision))
-            if deciding:
-                self._act(runner, behavior, deciding, actions)
-        return actions
-
-    def _act(self, runner: BehaviorRunner, behavior: str, deciding: list, actions: list) -> None:
-        spec = runner.spec
-        n_obs = len(spec.observation_specs)
-        if len(deciding) == 1:
-            obs = deciding[0][3].obs
-            masks = concat_masks(deciding[0][3], spec.action_spec.discrete_branches)
-        else:
-            obs = [np.concatenate([d[3].obs[i] for d in deciding]) for i in range(n_obs)]
-            ms = [concat_masks(d[3], spec.action_spec.discrete_branches) for d in deciding]
-            masks = None if ms[0] is None else np.concatenate(ms)
-        with self.timers.scope("policy.act"):
-            out = runner.trainer.policy.act(obs, masks, deterministic=runner.settings.network_settings.deterministic)
-        start = 0
-        for env_id, tracker, slots, decision in deciding:
-            end = start + len(decision)
-            tracker.on_actions(slots, out.continuous_raw[start:end], out.discrete[start:end],
-                               out.log_probs[start:end], None if masks is None else masks[start:end])
-            actions[env_id][behavior] = ActionTuple(out.env_actions.continuous[start:end],
-                                                    out.env_actions.discrete[start:end])
-            start = end
+                    end = start + len(decision)
+                    tracker.on_actions(slots, out.continuous_raw[start:end], out.discrete[start:end],
+                                       out.log_probs[start:end], None if masks is None else masks[start:end])
+                    start = end
 
     def _episode_stats(self, brain: str, tracker: AgentTracker) -> None:
         eps = tracker.drain_episodes()
@@ -315,11 +332,15 @@ def run_training(options) -> int:
         while True:
             state.side_channel_in(results)
             trajectories: list = []
-            actions = state.decide(results, trajectories)
+            actions, decided = state.decide(results)
             if state.finished:
+                state.record(decided, trajectories)
                 break
             with timers.scope("env.send"):
                 pool.send_step(actions, state.drain_side_channels())
+            # the simulators step now; meanwhile: experience, PPO, summaries
+            with timers.scope("record"):
+                state.record(decided, trajectories)
             state.learn(trajectories)
             state.report_progress()
             with timers.scope("env.wait"):

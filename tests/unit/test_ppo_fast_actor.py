@@ -44,6 +44,22 @@ def test_hybrid_heads_match_torch_and_follow_updates():
                     p.add_(0.05)
 
 
+def test_numpy_normaliser_updates_are_seen_without_version_bumps():
+    """Normalizer.update_numpy writes through shared memory (no torch version bump): the numpy
+    actor must still pick up the new statistics, and keep its weight copies."""
+    torch.manual_seed(0)
+    actor = Actor((vec(3),), ActionSpec(2, ()), HP)
+    fast = NumpyActor(actor)
+    obs = [np.array([[1.0, -2.0, 0.5], [4.0, 3.0, -1.0]], np.float32)]
+    before, _ = fast.heads(obs, None)
+    versions = [t._version for t in actor.buffers()]
+    actor.network_body.observation_encoder.encoders[0].normalizer.update_numpy(obs[0] * 10)
+    assert [t._version for t in actor.buffers()] == versions
+    after, _ = fast.heads(obs, None)
+    np.testing.assert_allclose(after, torch_heads(actor, obs, None)[0], rtol=1e-5, atol=1e-6)
+    assert not np.allclose(before, after)
+
+
 def test_load_state_dict_is_seen_and_visual_actors_are_not_supported():
     torch.manual_seed(0)
     a, b = Actor((vec(4),), ActionSpec(1, ()), HP), Actor((vec(4),), ActionSpec(1, ()), HP)

@@ -3,9 +3,11 @@
 Why: inside the trainer process every small torch op releases the GIL, and gRPC's threads take
 it each time; measured under load, ``Policy.act`` for one agent took 3 ms of ~40 tiny ops, most of
 it waiting to get the GIL back. The same forward pass in numpy (a few small matmuls, which keep
-the GIL) takes tens of microseconds. Training still runs in torch; this copy refreshes itself
-whenever any actor tensor changed (torch bumps ``Tensor._version`` on every in-place update:
-optimizer steps, normaliser updates, load_state_dict), so it can never act with stale weights.
+the GIL) takes tens of microseconds. This copy refreshes its weights whenever a parameter
+changed (torch bumps ``Tensor._version`` on every in-place update: optimizer steps,
+load_state_dict, the numpy update's ``finish``) and, separately and far more cheaply, its
+normaliser mean/std whenever a normaliser changed (every trajectory), so it never acts with
+stale values.
 
 Math (same as Actor.heads): x_i -> clip((x_i - mean_i)/sqrt(var_sum_i/steps_i), -5, 5) if
 normalised; h = concat(x_i); h = swish(h W_l^T + b_l) per hidden layer; mu = h W_mu^T + b_mu;
@@ -26,35 +28,61 @@ def supports(module: Actor | Critic) -> bool:
 
 
 class _Tracked:
-    """Knows when any parameter or buffer of ``module`` changed since the last look."""
+    """Knows when any of ``tensors`` changed since the last look.
 
-    def __init__(self, module: nn.Module) -> None:
-        self._tensors = list(module.parameters()) + list(module.buffers())
+    torch bumps ``Tensor._version`` on every in-place torch update (optimizer steps,
+    load_state_dict, the numpy update's ``finish``). ``watch`` adds 0-d numpy views whose values
+    count as well: ``Normalizer.update_numpy`` writes through shared memory, which bumps no
+    version, but always changes ``normalization_steps``.
+    """
+
+    def __init__(self, tensors, watch=()) -> None:
+        self._tensors = list(tensors)
+        self._watch = list(watch)
         self._key: tuple | None = None
 
     def stale(self) -> bool:
-        key = tuple((id(t), t._version) for t in self._tensors)
+        key = (tuple(t._version for t in self._tensors), tuple(w.item() for w in self._watch))
         if key != self._key:
             self._key = key
             return True
         return False
 
 
-def body_arrays(network_body) -> tuple[list, list]:
-    """(normalizers: (mean, std) or None per input, layers: (W^T, b) per hidden Linear) as numpy."""
+def normalizer_modules(network_body) -> list:
+    return [encoder.normalizer for encoder in network_body.observation_encoder.encoders]
+
+
+def normalizer_tracker(module: nn.Module, network_body) -> _Tracked:
+    """Changes of ``module``'s buffers, including numpy updates of its normalisers."""
+    steps = [n.normalization_steps.numpy() for n in normalizer_modules(network_body) if n is not None]
+    return _Tracked(module.buffers(), watch=steps)
+
+
+def body_normalizers(network_body) -> list:
+    """(mean, std) float32 per input, or None for an input without normaliser."""
     normalizers = []
     with torch.no_grad():
-        for encoder in network_body.observation_encoder.encoders:
-            norm = encoder.normalizer
+        for norm in normalizer_modules(network_body):
             if norm is None:
                 normalizers.append(None)
             else:
                 std = torch.sqrt(norm.running_variance / norm.normalization_steps)
                 normalizers.append((norm.running_mean.numpy().astype(np.float32).copy(),
                                     std.numpy().astype(np.float32).copy()))
-        layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy())
-                  for m in network_body.hidden if isinstance(m, nn.Linear)]
-    return normalizers, layers
+    return normalizers
+
+
+def body_layers(network_body) -> list:
+    """(W^T, b) per hidden Linear, as numpy copies."""
+    with torch.no_grad():
+        return [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy())
+                for m in network_body.hidden if isinstance(m, nn.Linear)]
+
+
+def body_arrays(network_body) -> tuple[list, list]:
+    """(normalizers: (mean, std) or None per input, layers: (W^T, b) per hidden Linear) as numpy."""
+    return body_normalizers(network_body), body_layers(network_body)
 
 
 def body_input(obs: list[np.ndarray], normalizers: list) -> np.ndarray:
@@ -84,15 +112,18 @@ class NumpyCritic:
         if not supports(critic):
             raise ValueError("NumpyCritic handles vector observations only")
         self.critic = critic
-        self._tracked = _Tracked(critic)
+        self._weights = _Tracked(critic.parameters())
+        self._normalizers = normalizer_tracker(critic, critic.network_body)
 
     def __call__(self, obs: list[np.ndarray]) -> dict[str, np.ndarray]:
         """Value estimates per reward signal, float32 [n] each."""
-        if self._tracked.stale():
-            self.normalizers, self.layers = body_arrays(self.critic.network_body)
+        if self._weights.stale():
+            self.layers = body_layers(self.critic.network_body)
             with torch.no_grad():
                 self.heads = {name: (head.weight.detach().numpy().T.copy(), head.bias.detach().numpy().copy())
                               for name, head in self.critic.value_heads.items()}
+        if self._normalizers.stale():
+            self.normalizers = body_normalizers(self.critic.network_body)
         h = body_forward(obs, self.normalizers, self.layers)
         return {name: (h @ weight + bias)[:, 0] for name, (weight, bias) in self.heads.items()}
 
@@ -102,14 +133,12 @@ class NumpyActor:
         if not supports(actor):
             raise ValueError("NumpyActor handles vector observations only")
         self.actor = actor
-        self._tracked = _Tracked(actor)
+        self._weights = _Tracked(actor.parameters())
+        self._normalizers = normalizer_tracker(actor, actor.network_body)
 
-    def _stale(self) -> bool:
-        return self._tracked.stale()
-
-    def _refresh(self) -> None:
+    def _refresh_weights(self) -> None:
         actor = self.actor
-        self.normalizers, self.layers = body_arrays(actor.network_body)
+        self.layers = body_layers(actor.network_body)
         with torch.no_grad():
             self.mu = None
             if actor.mu is not None:
@@ -122,8 +151,10 @@ class NumpyActor:
     def heads(self, obs: list[np.ndarray], allowed: np.ndarray | None
               ) -> tuple[np.ndarray | None, list[np.ndarray]]:
         """mu [n, c] or None, and masked logits [n, k_b] per branch (allowed: float [n, sum], 1 = allowed)."""
-        if self._stale():
-            self._refresh()
+        if self._weights.stale():
+            self._refresh_weights()
+        if self._normalizers.stale():
+            self.normalizers = body_normalizers(self.actor.network_body)
         h = body_forward(obs, self.normalizers, self.layers)
         mu = h @ self.mu[0] + self.mu[1] if self.mu is not None else None
         logits = []

@@ -41,8 +41,7 @@ def supports(trainer) -> bool:
 
 def _normalized(network_body, obs: list[np.ndarray]) -> np.ndarray:
     """The body's input (normalised, clipped, concatenated) for the whole buffer at once."""
-    normalizers, _ = fast_actor.body_arrays(network_body)
-    return fast_actor.body_input(obs, normalizers)
+    return fast_actor.body_input(obs, fast_actor.body_normalizers(network_body))
 
 
 class _Body:
