@@ -18,7 +18,7 @@ import numpy as np
 from protos.communicator_objects import capabilities_pb2, command_pb2, observation_pb2
 from protos.communicator_objects import unity_rl_input_pb2
 from trainer.errors import ProtocolError, UnityVersionError
-from trainer.protocol import wire
+from trainer.protocol import records, wire
 from trainer.protocol.png import decode_png_observation
 from trainer.protocol.types import (
     ActionSpec,
@@ -145,7 +145,7 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec]) -> StepRes
     steps = {}
     for name, spec in specs.items():
         if name in agent_infos:
-            steps[name] = steps_from_agent_infos(name, agent_infos[name].value, spec)
+            steps[name] = steps_from_agent_infos(name, agent_infos[name].value, spec, agent_infos[name])
         else:
             steps[name] = (DecisionSteps.empty(spec), TerminalSteps.empty(spec))
     return StepResult(specs=new_specs, steps=steps, side_channel=output.rl_output.side_channel)
@@ -159,52 +159,69 @@ _SERIALIZE = operator.methodcaller("SerializeToString")
 
 
 def steps_from_agent_infos(
-    behavior_name: str, agent_infos: Sequence, spec: BehaviorSpec
+    behavior_name: str, agent_infos: Sequence, spec: BehaviorSpec, agent_info_list=None
 ) -> tuple[DecisionSteps, TerminalSteps]:
     """Split n AgentInfoProtos into DecisionSteps (done=false) and TerminalSteps (done=true).
 
-    Relative order is kept. Shapes as in ``trainer.protocol.types``.
+    Relative order is kept. Shapes as in ``trainer.protocol.types``. ``agent_info_list`` (the
+    ListAgentInfoProto holding ``agent_infos``) lets many agents be decoded from its serialized
+    bytes at once (``records``); agent by agent otherwise, or when that does not apply.
     """
     n = len(agent_infos)
-    # one pass over the protos; float64 holds float32 rewards and int32 ids exactly
-    scalars = np.array(list(map(_SCALAR_FIELDS, agent_infos)), dtype=np.float64).reshape(n, 6)
-    floats = scalars[:, :2].astype(np.float32)
-    agent_id, group_id = scalars[:, 2].astype(np.int64), scalars[:, 3].astype(np.int32)
-    done, max_step = scalars[:, 4] != 0, scalars[:, 5] != 0
-    if not np.isfinite(floats).all():
-        _require_finite(floats[:, 0], behavior_name, "reward", agent_id)
-        _require_finite(floats[:, 1], behavior_name, "group_reward", agent_id)
-    all_obs = list(map(_OBSERVATIONS, agent_infos))
-    obs = [
-        _stack_observation(behavior_name, index, obs_spec, all_obs, agent_id)
-        for index, obs_spec in enumerate(spec.observation_specs)
-    ]
+    branches = spec.action_spec.discrete_branches
+    fast = None
+    if agent_info_list is not None and n >= records.MIN_ROWS:
+        fast = records.decode(behavior_name, agent_info_list.SerializeToString(),
+                              [tuple(o.shape) for o in spec.observation_specs], int(sum(branches)))
+    if fast is not None:
+        reward, group_reward, agent_id = fast.reward, fast.group_reward, fast.agent_id
+        group_id, done, max_step = fast.group_id, fast.done, fast.max_step
+        for index, (stacked, obs_spec) in enumerate(zip(fast.obs, spec.observation_specs)):
+            _require_finite(stacked, behavior_name, f"observation {index} ({obs_spec.name})", agent_id)
+        obs = fast.obs
+        mask_matrix = fast.mask if branches else None
+    else:
+        # one pass over the protos; float64 holds float32 rewards and int32 ids exactly
+        scalars = np.array(list(map(_SCALAR_FIELDS, agent_infos)), dtype=np.float64).reshape(n, 6)
+        floats = scalars[:, :2].astype(np.float32)
+        reward, group_reward = floats[:, 0], floats[:, 1]
+        agent_id, group_id = scalars[:, 2].astype(np.int64), scalars[:, 3].astype(np.int32)
+        done, max_step = scalars[:, 4] != 0, scalars[:, 5] != 0
+        all_obs = list(map(_OBSERVATIONS, agent_infos))
+        obs = [
+            _stack_observation(behavior_name, index, obs_spec, all_obs, agent_id)
+            for index, obs_spec in enumerate(spec.observation_specs)
+        ]
+        mask_matrix = _mask_matrix(agent_infos, int(sum(branches))) if branches else None
+    if not (np.isfinite(reward).all() and np.isfinite(group_reward).all()):
+        _require_finite(reward, behavior_name, "reward", agent_id)
+        _require_finite(group_reward, behavior_name, "group_reward", agent_id)
     if not done.any():  # the common message: nobody finished, no boolean indexing needed
         decision = DecisionSteps(
             obs=obs,
-            reward=floats[:, 0].copy(),
+            reward=reward.copy(),
             agent_id=agent_id,
-            action_mask=_action_masks(agent_infos, None, spec.action_spec),
+            action_mask=_split_branches(mask_matrix, branches),
             group_id=group_id,
-            group_reward=floats[:, 1].copy(),
+            group_reward=group_reward.copy(),
         )
         return decision, _empty_terminal(spec)
     deciding = ~done
     decision = DecisionSteps(
         obs=[o[deciding] for o in obs],
-        reward=floats[deciding, 0],
+        reward=reward[deciding],
         agent_id=agent_id[deciding],
-        action_mask=_action_masks(agent_infos, deciding, spec.action_spec),
+        action_mask=_split_branches(None if mask_matrix is None else mask_matrix[deciding], branches),
         group_id=group_id[deciding],
-        group_reward=floats[deciding, 1],
+        group_reward=group_reward[deciding],
     )
     terminal = TerminalSteps(
         obs=[o[done] for o in obs],
-        reward=floats[done, 0],
+        reward=reward[done],
         interrupted=max_step[done],
         agent_id=agent_id[done],
         group_id=group_id[done],
-        group_reward=floats[done, 1],
+        group_reward=group_reward[done],
     )
     return decision, terminal
 
@@ -300,29 +317,23 @@ def _stack_visual(
     return out
 
 
-def _action_masks(
-    agent_infos: Sequence, deciding: np.ndarray | None, action_spec: ActionSpec
-) -> list[np.ndarray] | None:
-    """Per branch bool [n_deciding, branch_size], True = masked; None without discrete branches.
-
-    ``deciding`` None means every agent. A mask whose length differs from the sum of the branch
-    sizes is ignored (nothing masked).
-    """
-    branches = action_spec.discrete_branches
-    if not branches:
-        return None
-    total = int(sum(branches))
-    if deciding is None:
-        masks = [a.action_mask for a in agent_infos]
-    else:
-        masks = [a.action_mask for a, d in zip(agent_infos, deciding) if d]
+def _mask_matrix(agent_infos: Sequence, total: int) -> np.ndarray:
+    """bool [n, total], True = masked. A mask whose length is not ``total`` (the sum of the
+    branch sizes) is ignored: nothing masked for that agent."""
+    masks = [a.action_mask for a in agent_infos]
     matrix = np.zeros((len(masks), total), dtype=bool)
     rows = [row for row, mask in enumerate(masks) if len(mask) == total]
     if rows:
         flat = itertools.chain.from_iterable(masks[row] for row in rows)
         matrix[rows] = np.fromiter(flat, dtype=bool, count=len(rows) * total).reshape(-1, total)
-    bounds = _branch_bounds(branches)
-    return [matrix[:, start:end] for start, end in bounds]
+    return matrix
+
+
+def _split_branches(matrix: np.ndarray | None, branches: tuple[int, ...]) -> list[np.ndarray] | None:
+    """Per branch bool [n, branch_size]; None without discrete branches."""
+    if not branches:
+        return None
+    return [matrix[:, start:end] for start, end in _branch_bounds(branches)]
 
 
 @functools.lru_cache(maxsize=64)

@@ -1,0 +1,179 @@
+"""Many AgentInfoProtos decoded from their bytes at once (trainer.protocol.records) must give
+exactly what the agent-by-agent parse gives, and step aside whenever it cannot."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from protos.communicator_objects import agent_info_pb2, observation_pb2
+from tests.protocol.conftest import agent_info, brain_params
+from tests.protocol.test_codec import output_with
+from trainer.errors import ProtocolError
+from trainer.protocol import codec, records
+from trainer.protocol.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
+
+
+@pytest.fixture(autouse=True)
+def matrix_path_for_any_count(monkeypatch):
+    """Messages here are small; the codec must take the matrix path for them anyway."""
+    monkeypatch.setattr(records, "MIN_ROWS", 1)
+
+
+def vec(size: int, name: str = "v") -> ObservationSpec:
+    return ObservationSpec((size,), (DimensionProperty.NONE,), ObservationType.DEFAULT, name)
+
+
+def list_of(infos):
+    out = output_with({"B": infos}, [brain_params("B", 2, (3, 2))])
+    return out.rl_output.agentInfos["B"]
+
+
+def both_paths(infos, spec):
+    """(matrix path, per-agent path) through codec.steps_from_agent_infos."""
+    lst = list_of(infos)
+    fast = codec.steps_from_agent_infos("B", lst.value, spec, lst)
+    slow = codec.steps_from_agent_infos("B", lst.value, spec)
+    return fast, slow
+
+
+def assert_same_steps(a, b):
+    for x, y in zip(a, b):  # (DecisionSteps, TerminalSteps)
+        for field in ("reward", "agent_id", "group_id", "group_reward") + (("interrupted",) if hasattr(x, "interrupted") else ()):
+            got, want = getattr(x, field), getattr(y, field)
+            assert got.dtype == want.dtype, field
+            np.testing.assert_array_equal(got, want, err_msg=field)
+        for got, want in zip(x.obs, y.obs):
+            assert got.dtype == want.dtype == np.float32
+            np.testing.assert_array_equal(got, want)
+        if getattr(x, "action_mask", None) is not None:
+            for got, want in zip(x.action_mask, y.action_mask):
+                np.testing.assert_array_equal(got, want)
+
+
+SPEC = BehaviorSpec((vec(3, "pos"), vec(2, "vel")), ActionSpec(2, (3, 2)))
+
+
+def varied_infos(n: int, seed: int):
+    """Every field and every varint length the wire can carry, in a realistic mix."""
+    rng = np.random.default_rng(seed)
+    ids = [1, 127, 128, 16383, 16384, 2**21, 2**31 - 1, -1, -5, 0]
+    infos = []
+    for k in range(n):
+        masked = rng.random() < 0.8
+        infos.append(agent_info(
+            int(ids[k % len(ids)]) if k < len(ids) else int(rng.integers(0, 300)),
+            obs=[rng.normal(size=3).astype(np.float32).tolist(), rng.normal(size=2).astype(np.float32).tolist()],
+            reward=float(np.float32(rng.normal())) if rng.random() < 0.7 else 0.0,
+            done=bool(rng.random() < 0.2), max_step=bool(rng.random() < 0.1),
+            mask=(rng.random(5) < 0.3).tolist() if masked else (rng.random(2) < 0.5).tolist(),
+            group_id=int(rng.integers(0, 3)) * int(rng.integers(0, 200)),
+            group_reward=float(np.float32(rng.normal())) if rng.random() < 0.3 else 0.0,
+        ))
+    return infos
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_matrix_path_equals_agent_by_agent_on_varied_messages(seed, monkeypatch):
+    infos = varied_infos(60, seed)
+    lst = list_of(infos)
+    assert records.decode("B", lst.SerializeToString(), [(3,), (2,)], 5) is not None  # really taken
+    fast, slow = both_paths(infos, SPEC)
+    assert_same_steps(fast, slow)
+    monkeypatch.setattr(records, "decode", lambda *a: pytest.fail("matrix path used for the slow one"))
+    codec.steps_from_agent_infos("B", lst.value, SPEC)  # the per-agent path really is another path
+    # and against values written by hand for a few agents
+    decision, terminal = slow
+    expected_ids = [info.id for info in infos if not info.done]
+    np.testing.assert_array_equal(fast[0].agent_id, expected_ids)
+
+
+def test_values_read_by_hand():
+    infos = [agent_info(k, obs=[[k, 2.5, -1.0], [0.0, float(k) / 4]], reward=0.5 * k, mask=[k % 2 == 0] + [False] * 4)
+             for k in range(24)]
+    infos[3] = agent_info(-7, obs=[[3, 2.5, -1.0], [0.0, 0.75]], reward=1.5, done=True, max_step=True, group_id=9,
+                          group_reward=-2.0)
+    lst = list_of(infos)
+    got = records.decode("B", lst.SerializeToString(), [(3,), (2,)], 5)
+    assert got.agent_id[:5].tolist() == [0, 1, 2, -7, 4]
+    assert got.reward[:5].tolist() == [0.0, 0.5, 1.0, 1.5, 2.0]
+    assert got.done.tolist() == [k == 3 for k in range(24)]
+    assert got.max_step[3] and got.group_id[3] == 9 and got.group_reward[3] == -2.0
+    assert got.obs[0][4].tolist() == [4.0, 2.5, -1.0] and got.obs[1][2].tolist() == [0.0, 0.5]
+    assert got.mask[:, 0].tolist() == [k % 2 == 0 and k != 3 for k in range(24)]
+    assert not got.mask[:, 1:].any()
+
+
+def test_same_length_different_layouts_are_split_by_layout():
+    # reward (field 7) vs group_reward (field 15): both 5 bytes, so the records have one length
+    infos = [agent_info(k, obs=[[1, 2, 3], [4, 5]], reward=1.0 if k % 2 else 0.0,
+                        group_reward=0.0 if k % 2 else 1.0) for k in range(1, 31)]
+    data = list_of(infos).SerializeToString()
+    assert len(set(records.split_records(data)[1].tolist())) == 1
+    got = records.decode("B", data, [(3,), (2,)], 5)
+    assert got.reward.tolist() == [1.0 if k % 2 else 0.0 for k in range(1, 31)]
+    assert got.group_reward.tolist() == [0.0 if k % 2 else 1.0 for k in range(1, 31)]
+    fast, slow = both_paths(infos, SPEC)
+    assert_same_steps(fast, slow)
+    assert fast[0].reward.tolist() == [1.0 if k % 2 else 0.0 for k in range(1, 31)]
+
+
+def test_compressed_observations_and_wrong_shapes_step_aside():
+    infos = [agent_info(k, obs=[[1, 2, 3], [4, 5]]) for k in range(1, 31)]
+    png = agent_info_pb2.AgentInfoProto()
+    png.CopyFrom(infos[0])
+    png.observations[1].compression_type = observation_pb2.PNG
+    assert records.decode("B", list_of(infos[:29] + [png]).SerializeToString(), [(3,), (2,)], 5) is None
+    # a shape other than the spec's: the per-agent parse gives the precise error
+    bad = infos[:29] + [agent_info(99, obs=[[1, 2, 3], [4, 5, 6]])]
+    assert records.decode("B", list_of(bad).SerializeToString(), [(3,), (2,)], 5) is None
+    lst = list_of(bad)
+    with pytest.raises(ProtocolError, match="agent id 99"):
+        codec.steps_from_agent_infos("B", lst.value, SPEC, lst)
+
+
+def test_non_finite_values_are_still_rejected_on_the_matrix_path():
+    infos = [agent_info(k, obs=[[1, 2, 3], [4, 5]], reward=0.1) for k in range(1, 31)]
+    infos[7] = agent_info(8, obs=[[1, float("nan"), 3], [4, 5]], reward=0.1)
+    lst = list_of(infos)
+    assert records.decode("B", lst.SerializeToString(), [(3,), (2,)], 5) is not None
+    with pytest.raises(ProtocolError, match="agent id 8"):
+        codec.steps_from_agent_infos("B", lst.value, SPEC, lst)
+    infos[7] = agent_info(8, obs=[[1, 2, 3], [4, 5]], reward=float("inf"))
+    lst = list_of(infos)
+    with pytest.raises(ProtocolError, match="reward for agent id 8"):
+        codec.steps_from_agent_infos("B", lst.value, SPEC, lst)
+
+
+def test_split_records_rejects_other_fields_and_truncation():
+    data = list_of([agent_info(k, obs=[[1, 2, 3], [4, 5]]) for k in range(3)]).SerializeToString()
+    starts, lengths = records.split_records(data)
+    assert len(starts) == 3 and starts[0] == 2 and int(lengths.sum()) == len(data) - 6
+    assert records.split_records(data[:-1]) is None
+    assert records.split_records(b"\x12" + data[1:]) is None
+
+
+def test_records_of_one_length_are_read_in_place():
+    infos = [agent_info(k, obs=[[k, 0, 1], [2, -k]], reward=0.25 * k) for k in range(1, 41)]
+    data = list_of(infos).SerializeToString()
+    starts, lengths = records.split_records(data)
+    stride = int(lengths[0]) + 2
+    assert (lengths == lengths[0]).all() and starts.tolist() == list(range(2, len(data), stride))
+    got = records.decode("B", data, [(3,), (2,)], 5)
+    assert got.agent_id.tolist() == list(range(1, 41))
+    assert got.reward.tolist() == [0.25 * k for k in range(1, 41)]
+    assert got.obs[1][:, 1].tolist() == [-k for k in range(1, 41)]
+
+
+def test_lengths_that_only_add_up_to_a_fixed_stride_are_not_read_in_place():
+    # record lengths 10+1, 8, 12-1, 10: first == last and the total is n * (first + 2), yet the
+    # records do not sit at a fixed stride
+    infos = [agent_info(1, obs=[[1.0] * 3, [2.0] * 2], reward=0.5), agent_info(2, obs=[[1.0] * 3, [2.0] * 2]),
+             agent_info(3, obs=[[1.0] * 3, [2.0] * 2], reward=0.5, done=True, max_step=True),
+             agent_info(4, obs=[[1.0] * 3, [2.0] * 2], reward=0.5)]
+    infos = infos * 8
+    data = list_of(infos).SerializeToString()
+    starts, lengths = records.split_records(data)
+    got = records.decode("B", data, [(3,), (2,)], 5)
+    assert got.agent_id.tolist() == [1, 2, 3, 4] * 8
+    assert got.reward.tolist() == [0.5, 0.0, 0.5, 0.5] * 8
+    assert got.done.tolist() == [False, False, True, False] * 8
