@@ -177,3 +177,18 @@ def test_lengths_that_only_add_up_to_a_fixed_stride_are_not_read_in_place():
     assert got.agent_id.tolist() == [1, 2, 3, 4] * 8
     assert got.reward.tolist() == [0.5, 0.0, 0.5, 0.5] * 8
     assert got.done.tolist() == [False, False, True, False] * 8
+
+
+def test_records_longer_than_127_bytes_have_longer_headers():
+    spec_shapes = [(40,), (2,)]
+    infos = [agent_info(k, obs=[[float(k)] * (40 if k % 3 else 20), [1, 2]], reward=0.1 * (k % 2)) for k in range(1, 31)]
+    data = list_of(infos).SerializeToString()
+    starts, lengths = records.split_records(data)
+    assert (lengths > 127).any() and (lengths < 128).any() and len(starts) == 30
+    assert all(data[s - 2] == 0x0A or data[s - 3] == 0x0A for s in starts.tolist())
+    # rows whose first observation has 20 floats do not match the spec: the per-agent parse decides
+    assert records.decode("B", data, spec_shapes, 5) is None
+    long_only = [info for k, info in enumerate(infos, 1) if k % 3]
+    got = records.decode("B", list_of(long_only).SerializeToString(), spec_shapes, 5)
+    assert got.obs[0][:, 0].tolist() == [float(k) for k in range(1, 31) if k % 3]
+    assert np.allclose(got.reward, [0.1 * (k % 2) for k in range(1, 31) if k % 3])

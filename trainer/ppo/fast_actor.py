@@ -99,8 +99,12 @@ def body_input(obs: list[np.ndarray], normalizers: list) -> np.ndarray:
 def body_forward(obs: list[np.ndarray], normalizers: list, layers: list) -> np.ndarray:
     h = body_input(obs, normalizers)
     for weight, bias in layers:
-        h = h @ weight + bias
-        h = h / (1.0 + np.exp(-h))  # swish: x * sigmoid(x)
+        h = h @ weight  # a new array: the in-place steps below never touch the inputs
+        h += bias
+        t = np.negative(h)
+        np.exp(t, out=t)
+        t += 1.0
+        h /= t  # swish: x * sigmoid(x) = x / (1 + exp(-x)), the same float32 steps in place
     return h
 
 

@@ -62,6 +62,7 @@ class Policy:
         # vector-only actors on the CPU decide in numpy (see fast_actor for why)
         use_numpy = self.device.type == "cpu" and fast_actor.supports(self.actor)
         self._numpy_actor = fast_actor.NumpyActor(self.actor) if use_numpy else None
+        self._gaussian_cache = None
 
     @property
     def uses_numpy_actor(self) -> bool:
@@ -131,15 +132,14 @@ class Policy:
         entropy = np.zeros(n, dtype=np.float32)
         raw = np.zeros((n, 0), dtype=np.float32)
         if mu is not None:
-            sigma = np.exp(self._numpy_actor.log_sigma)  # [1, c]
+            sigma, variance_term, log_term, gaussian_entropy_mean = self._gaussian_constants()
             if deterministic:
                 raw = mu
             else:
                 noise = torch.randn(mu.shape, generator=self.generator).numpy()
                 raw = mu + noise * sigma
-            log_parts.append(-((raw - mu) ** 2) / (2 * sigma**2 + EPSILON) - np.log(sigma + EPSILON)
-                             - 0.5 * np.log(2 * np.pi))
-            entropy = entropy + np.mean(0.5 * np.log(2 * np.pi * np.e * sigma**2 + EPSILON))
+            log_parts.append(-((raw - mu) ** 2) / variance_term - log_term - 0.5 * np.log(2 * np.pi))
+            entropy = entropy + gaussian_entropy_mean
         chosen = []
         rows = np.arange(n)
         for branch_logits in logits:
@@ -165,6 +165,19 @@ class Policy:
             log_probs=np.concatenate(log_parts, axis=1).astype(np.float32),
             entropy=entropy.astype(np.float32),
         )
+
+    def _gaussian_constants(self):
+        """sigma, 2 sigma^2 + eps, log(sigma + eps) and the mean Gaussian entropy: they depend
+        on log_sigma only, so they are computed once per weight change, not per decision (the
+        same expressions as before, so the same float32 values)."""
+        log_sigma = self._numpy_actor.log_sigma
+        cached = self._gaussian_cache
+        if cached is None or cached[0] is not log_sigma:
+            sigma = np.exp(log_sigma)  # [1, c]
+            cached = (log_sigma, sigma, 2 * sigma**2 + EPSILON, np.log(sigma + EPSILON),
+                      np.mean(0.5 * np.log(2 * np.pi * np.e * sigma**2 + EPSILON)))
+            self._gaussian_cache = cached
+        return cached[1:]
 
     def evaluate(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None,
                  continuous_actions: torch.Tensor, discrete_actions: torch.Tensor

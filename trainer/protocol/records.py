@@ -205,21 +205,32 @@ def split_records(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
         if (headers[:, 0] == 0x0A).all() and (headers[:, 1] == data[1]).all():
             count = end // stride
             return np.arange(2, end, stride, dtype=np.intp), np.full(count, data[1], dtype=np.intp)
+    # records shorter than 128 bytes have 2-byte headers: only their starts need collecting
+    starts: list[int] = []
+    append = starts.append
+    pos = 0
+    while pos < end:
+        size = data[pos + 1] if pos + 1 < end else 0x80
+        if data[pos] != 0x0A or size >= 0x80:
+            break
+        pos += 2
+        append(pos)
+        pos += size
+    if pos == end:
+        bounds = np.array(starts + [end + 2], dtype=np.intp)
+        return bounds[:-1], np.diff(bounds) - 2
+    # a long record somewhere: the general walk
     starts, lengths = [], []
     pos = 0
     try:
         while pos < end:
             if data[pos] != 0x0A:
                 return None
-            size = data[pos + 1]
-            if size < 0x80:
-                pos += 2
-            else:
-                size, pos = _varint(data, pos + 1, end)
+            size, pos = _varint(data, pos + 1, end)
             starts.append(pos)
             lengths.append(size)
             pos += size
-    except (_Unsupported, IndexError):
+    except _Unsupported:
         return None
     if pos != end:
         return None
