@@ -151,7 +151,7 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     Replays what both ends do around one exchange, with the stub's own Academy and our codec:
     stub physics (advance), stub encode (collect_encoded + UnityMessageProto + serialize),
     trainer decode (parse + decode_rl_output), trainer encode (fill_rl_input + serialize),
-    stub decode (parse + apply_actions). Whatever the real run takes beyond the sum is gRPC
+    stub decode (parse + apply_action_list). Whatever the real run takes beyond the sum is gRPC
     transport plus thread/process hand-offs.
     """
     from protos.communicator_objects import unity_message_pb2
@@ -187,7 +187,7 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
         wire_down = response.SerializeToString()
         t3 = clock()
         answer = unity_message_pb2.UnityMessageProto.FromString(wire_down)
-        academy.apply_actions(list(answer.unity_input.rl_input.agent_actions[spec_key].value))
+        academy.apply_action_list(answer.unity_input.rl_input.agent_actions.get(spec_key))
         t4 = clock()
         academy.advance()
         t5 = clock()

@@ -108,6 +108,10 @@ class RunState:
         opts = self.options
         logger.info("Connected new brain: %s", behavior_name)
         settings = opts.behavior_settings(brain)
+        if settings.threaded:
+            logger.warning("%s: threaded: true is accepted but has no effect here; updates run between "
+                           "environment steps, as with threaded: false (same results, no policy lag).",
+                           brain)
         ck = opts.checkpoint_settings
         seed = opts.env_settings.seed + len(self.runners)
         runner = BehaviorRunner.create(brain, spec, settings, self.run_dir, seed,

@@ -25,6 +25,7 @@ from typing import Sequence
 import numpy as np
 
 from protos.communicator_objects import agent_action_pb2, agent_info_pb2
+from trainer.protocol import records
 from unity_stub_env.agents import EncodedInfos, EpisodeIdCounter, encode_agent_infos
 from unity_stub_env.tasks.base import Stat, Task
 
@@ -111,6 +112,22 @@ class Academy:
         if spec.discrete_branches:
             self.discrete[:] = _action_rows(list(map(_DISCRETE, actions)), len(spec.discrete_branches),
                                             "discrete", np.int32)
+
+    def apply_action_list(self, actions) -> None:
+        """``apply_actions`` for a ListAgentActionProto (or None): many agents are read from its
+        serialized bytes at once (``trainer.protocol.records``), few or unusual ones one by one."""
+        if actions is None:
+            self.apply_actions([])
+            return
+        n = len(actions.value)
+        if n == self.task.num_agents and n >= records.MIN_ROWS:
+            spec = self.task.action_spec
+            decoded = records.decode_actions(self.behavior_key, actions.SerializeToString(),
+                                             spec.continuous_size, len(spec.discrete_branches))
+            if decoded is not None:
+                self.continuous[:], self.discrete[:] = decoded
+                return
+        self.apply_actions(actions.value)
 
     def advance(self) -> None:
         """Run ``decision_period`` control steps; finished agents are reset on the spot."""

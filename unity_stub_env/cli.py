@@ -162,8 +162,7 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
                 academy.environment_reset()
             continue
         for academy, _ in academies:
-            actions = rl_input.agent_actions.get(academy.behavior_key)
-            academy.apply_actions(actions.value if actions is not None else [])
+            academy.apply_action_list(rl_input.agent_actions.get(academy.behavior_key))
             academy.advance()
 
 if __name__ == "__main__":

@@ -87,11 +87,14 @@ def test_resume_continues_at_saved_step(tmp_path, basic_config, env_no_proxy):
     assert second["Basic"]["final_checkpoint"]["steps"] > 1200
     assert min(c["steps"] for c in second["Basic"]["checkpoints"]) <= first_step + 300
     # --initialize-from: a new run starts at step 0 from the other run's weights
-    r = learn([str(basic_config(max_steps=300, interval=300, name="init.yaml")), "--env", "stub:basic",
+    init_cfg = basic_config(max_steps=300, interval=300, name="init.yaml")
+    init_cfg.write_text(init_cfg.read_text().replace("    trainer_type: ppo\n", "    trainer_type: ppo\n    threaded: true\n"))
+    r = learn([str(init_cfg), "--env", "stub:basic",
                "--run-id", "r2", "--initialize-from", "r", "--results-dir", res, "--base-port", str(port)],
               cwd=tmp_path, env=env_no_proxy)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "results/r/Basic/checkpoint.pt for behavior Basic at step 0" in r.stdout
+    assert "threaded: true is accepted but has no effect" in r.stdout  # said, not silently ignored
     third = json.loads((tmp_path / "results/r2/run_logs/training_status.json").read_text())
     assert 300 < third["Basic"]["final_checkpoint"]["steps"] < 400
 

@@ -55,8 +55,23 @@ def _varint(data: bytes, pos: int, end: int) -> tuple[int, int]:
         shift += 7
 
 
-class _Layout:
-    """Where the fixed bytes and the values sit in a record of one length."""
+class _Checked:
+    """A walked record's fixed bytes and varint value bytes, checked against many rows at once."""
+
+    def _finish(self, record: bytes, fixed: list[int], cont: list[int]) -> None:
+        # one check for both: fixed bytes compare whole, varint value bytes by continuation bit
+        self.checked = np.array(fixed + cont, dtype=np.intp)
+        self.check_mask = np.array([0xFF] * len(fixed) + [0x80] * len(cont), dtype=np.uint8)
+        template = np.frombuffer(record, dtype=np.uint8)
+        self.expected = template[self.checked] & self.check_mask
+
+    def matches(self, rows: np.ndarray) -> np.ndarray:
+        """bool [rows]: which rows parse exactly like the walked record."""
+        return ((rows[:, self.checked] & self.check_mask) == self.expected).all(axis=1)
+
+
+class _Layout(_Checked):
+    """Where the fixed bytes and the values sit in an AgentInfoProto record of one length."""
 
     def __init__(self, record: bytes) -> None:
         self.length = len(record)
@@ -118,15 +133,63 @@ class _Layout:
                 pos = content_end
             else:
                 raise _Unsupported("group wire type")
-        # one check for both: fixed bytes compare whole, varint value bytes by continuation bit
-        self.checked = np.array(fixed + cont, dtype=np.intp)
-        self.check_mask = np.array([0xFF] * len(fixed) + [0x80] * len(cont), dtype=np.uint8)
-        template = np.frombuffer(record, dtype=np.uint8)
-        self.expected = template[self.checked] & self.check_mask
+        self._finish(record, fixed, cont)
 
-    def matches(self, rows: np.ndarray) -> np.ndarray:
-        """bool [rows]: which rows parse exactly like the walked record."""
-        return ((rows[:, self.checked] & self.check_mask) == self.expected).all(axis=1)
+
+class _ActionLayout(_Checked):
+    """The same for an AgentActionProto: 1 vector_actions_deprecated (packed float), 4 value
+    (float), 6 continuous_actions (packed float), 7 discrete_actions (packed int32)."""
+
+    def __init__(self, record: bytes) -> None:
+        fixed: list[int] = []
+        cont: list[int] = []
+        self.continuous: tuple[int, int] = (0, 0)  # (first column, count)
+        self.discrete: list[list[int]] = []  # the columns of each discrete action's varint
+        seen: set[int] = set()
+        pos, end = 0, len(record)
+        while pos < end:
+            start = pos
+            key, pos = _varint(record, pos, end)
+            fixed.extend(range(start, pos))
+            field, wire_type = key >> 3, key & 7
+            if field in seen and field in (1, 4, 6, 7):
+                raise _Unsupported("field split or repeated")
+            seen.add(field)
+            if wire_type == 2:
+                start = pos
+                size, pos = _varint(record, pos, end)
+                fixed.extend(range(start, pos))
+                content_end = pos + size
+                if content_end > end or (field in (1, 6) and size % 4):
+                    raise _Unsupported("bad packed field")
+                if field == 6:
+                    self.continuous = (pos, size // 4)
+                elif field == 7:
+                    p = pos
+                    while p < content_end:
+                        first = p
+                        _, p = _varint(record, p, content_end)
+                        self.discrete.append(list(range(first, p)))
+                        cont.extend(range(first, p))
+                elif field != 1:  # deprecated vector actions: values nobody reads here
+                    fixed.extend(range(pos, content_end))
+                pos = content_end
+            elif wire_type == 5:
+                if pos + 4 > end:
+                    raise _Unsupported("truncated fixed32")
+                if field != 4:
+                    fixed.extend(range(pos, pos + 4))
+                pos += 4
+            elif wire_type == 0 and field not in (1, 6, 7):
+                start = pos
+                _, pos = _varint(record, pos, end)
+                fixed.extend(range(start, pos))
+            elif wire_type == 1 and pos + 8 <= end:
+                fixed.extend(range(pos, pos + 8))
+                pos += 8
+            else:
+                raise _Unsupported("unpacked actions or group wire type")
+        self._finish(record, fixed, cont)
 
 
 def _observation_layout(record: bytes, pos: int, end: int, fixed: list[int]):
@@ -251,30 +314,20 @@ class Decoded:
     mask: np.ndarray  # bool [n, mask_width]; rows whose mask length differs are all False
 
 
-_LAYOUTS: dict[tuple[str, int], list[_Layout]] = {}
+_LAYOUTS: dict[tuple, list[_Checked]] = {}
 _MAX_LAYOUTS = 8  # per record length; more distinct layouts than this: parse agent by agent
 
 
-def decode(key: str, data: bytes, shapes: list[tuple[int, ...]], mask_width: int) -> Decoded | None:
-    """All AgentInfoProtos of serialized ListAgentInfoProto ``data``, or None (see module doc).
-
-    ``shapes``: the behavior's observation shapes (all must be uncompressed floats);
-    ``mask_width``: the sum of its discrete branch sizes.
-    """
+def _groups(key, data: bytes, make_layout) -> tuple[int, list]:
+    """Cut ``data`` into records and sort them by layout: (record count, [(rows, uint8 matrix
+    [rows, length], layout)]) covering every record once. Raises _Unsupported."""
     split = split_records(data)
     if split is None:
-        return None
+        raise _Unsupported("not a repeated message field 1")
     starts, lengths = split
     n = len(starts)
     buf = np.frombuffer(data, dtype=np.uint8)
-    out = Decoded(
-        reward=np.zeros(n, np.float32), group_reward=np.zeros(n, np.float32),
-        agent_id=np.zeros(n, np.int64), group_id=np.zeros(n, np.int32),
-        done=np.zeros(n, bool), max_step=np.zeros(n, bool),
-        obs=[np.zeros((n, *shape), np.float32) for shape in shapes],
-        mask=np.zeros((n, mask_width), bool),
-    )
-    sizes = [math.prod(shape) for shape in shapes]
+    groups = []
     # all records one length with 2-byte headers: they sit at a fixed stride in ``data``
     uniform = n > 0 and bool((lengths == lengths[0]).all()) and len(buf) == n * (int(lengths[0]) + 2)
     distinct = [int(lengths[0])] if uniform else sorted(set(lengths.tolist()))
@@ -296,27 +349,70 @@ def decode(key: str, data: bytes, shapes: list[tuple[int, ...]], mask_width: int
                     break
             if ok is None or not ok.any():
                 first = int(starts[rows[0]])
-                try:
-                    layout = _Layout(data[first:first + length])
-                except _Unsupported:
-                    return None
+                layout = make_layout(data[first:first + length])
                 layouts.insert(0, layout)
                 del layouts[_MAX_LAYOUTS:]
                 ok = layout.matches(matrix)
-            if len(layout.obs) != len(shapes) or any(
-                    shape != want or count != size
-                    for (shape, _, count), want, size in zip(layout.obs, shapes, sizes)):
-                return None  # the per-agent parse reports the mismatch
             if ok.all():
-                _fill(out, rows, matrix, layout, mask_width)
+                groups.append((rows, matrix, layout))
                 break
-            _fill(out, rows[ok], matrix[ok], layout, mask_width)
+            groups.append((rows[ok], matrix[ok], layout))
             rows, matrix = rows[~ok], matrix[~ok]
         else:
-            return None
+            raise _Unsupported("too many layouts")
     if len(_LAYOUTS) > 256:
         _LAYOUTS.clear()
+    return n, groups
+
+
+def decode(key: str, data: bytes, shapes: list[tuple[int, ...]], mask_width: int) -> Decoded | None:
+    """All AgentInfoProtos of serialized ListAgentInfoProto ``data``, or None (see module doc).
+
+    ``shapes``: the behavior's observation shapes (all must be uncompressed floats);
+    ``mask_width``: the sum of its discrete branch sizes.
+    """
+    try:
+        n, groups = _groups(key, data, _Layout)
+    except _Unsupported:
+        return None
+    sizes = [math.prod(shape) for shape in shapes]
+    for _, _, layout in groups:
+        if len(layout.obs) != len(shapes) or any(
+                shape != want or count != size
+                for (shape, _, count), want, size in zip(layout.obs, shapes, sizes)):
+            return None  # the per-agent parse reports the mismatch
+    out = Decoded(
+        reward=np.zeros(n, np.float32), group_reward=np.zeros(n, np.float32),
+        agent_id=np.zeros(n, np.int64), group_id=np.zeros(n, np.int32),
+        done=np.zeros(n, bool), max_step=np.zeros(n, bool),
+        obs=[np.zeros((n, *shape), np.float32) for shape in shapes],
+        mask=np.zeros((n, mask_width), bool),
+    )
+    for rows, matrix, layout in groups:
+        _fill(out, rows, matrix, layout, mask_width)
     return out
+
+
+def decode_actions(key: str, data: bytes, continuous: int, branches: int
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Serialized ListAgentActionProto → (continuous float32 [n, continuous], discrete int32
+    [n, branches]), or None when the matrix path does not apply or any agent's widths differ
+    (the per-agent path then reports it)."""
+    try:
+        n, groups = _groups(("actions", key), data, _ActionLayout)
+    except _Unsupported:
+        return None
+    cont = np.zeros((n, continuous), np.float32)
+    disc = np.zeros((n, branches), np.int32)
+    for rows, matrix, layout in groups:
+        column, count = layout.continuous
+        if count != continuous or len(layout.discrete) != branches:
+            return None
+        if count:
+            cont[rows] = _f32(matrix, column, count)
+        for branch, columns in enumerate(layout.discrete):
+            disc[rows, branch] = _int32(_varints(matrix, columns))
+    return cont, disc
 
 
 def _f32(matrix: np.ndarray, column: int, count: int = 1) -> np.ndarray:
