@@ -44,20 +44,25 @@ def test_hybrid_heads_match_torch_and_follow_updates():
                     p.add_(0.05)
 
 
-def test_numpy_normaliser_updates_are_seen_without_version_bumps():
-    """Normalizer.update_numpy writes through shared memory (no torch version bump): the numpy
-    actor must still pick up the new statistics, and keep its weight copies."""
+def test_normaliser_updates_refresh_only_the_normalisers():
+    """A normaliser update (every trajectory) must reach the numpy actor without re-copying its
+    weights; a weight change must re-copy them."""
     torch.manual_seed(0)
     actor = Actor((vec(3),), ActionSpec(2, ()), HP)
     fast = NumpyActor(actor)
     obs = [np.array([[1.0, -2.0, 0.5], [4.0, 3.0, -1.0]], np.float32)]
     before, _ = fast.heads(obs, None)
-    versions = [t._version for t in actor.buffers()]
-    actor.network_body.observation_encoder.encoders[0].normalizer.update_numpy(obs[0] * 10)
-    assert [t._version for t in actor.buffers()] == versions
+    layers = fast.layers
+    actor.update_normalization([torch.from_numpy(obs[0] * 10)])
     after, _ = fast.heads(obs, None)
     np.testing.assert_allclose(after, torch_heads(actor, obs, None)[0], rtol=1e-5, atol=1e-6)
     assert not np.allclose(before, after)
+    assert fast.layers is layers  # weights untouched: no copy
+    with torch.no_grad():
+        actor.network_body.hidden[0].weight.add_(0.1)
+    moved, _ = fast.heads(obs, None)
+    assert fast.layers is not layers
+    np.testing.assert_allclose(moved, torch_heads(actor, obs, None)[0], rtol=1e-5, atol=1e-6)
 
 
 def test_load_state_dict_is_seen_and_visual_actors_are_not_supported():

@@ -28,42 +28,31 @@ def supports(module: Actor | Critic) -> bool:
 
 
 class _Tracked:
-    """Knows when any of ``tensors`` changed since the last look.
+    """Knows when any of ``tensors`` changed since the last look: torch bumps
+    ``Tensor._version`` on every in-place torch update (optimizer steps, normaliser updates,
+    load_state_dict, the numpy update's ``finish``)."""
 
-    torch bumps ``Tensor._version`` on every in-place torch update (optimizer steps,
-    load_state_dict, the numpy update's ``finish``). ``watch`` adds 0-d numpy views whose values
-    count as well: ``Normalizer.update_numpy`` writes through shared memory, which bumps no
-    version, but always changes ``normalization_steps``.
-    """
-
-    def __init__(self, tensors, watch=()) -> None:
+    def __init__(self, tensors) -> None:
         self._tensors = list(tensors)
-        self._watch = list(watch)
         self._key: tuple | None = None
 
     def stale(self) -> bool:
-        key = (tuple(t._version for t in self._tensors), tuple(w.item() for w in self._watch))
+        key = tuple(t._version for t in self._tensors)
         if key != self._key:
             self._key = key
             return True
         return False
 
 
-def normalizer_modules(network_body) -> list:
+def _normalizer_modules(network_body) -> list:
     return [encoder.normalizer for encoder in network_body.observation_encoder.encoders]
-
-
-def normalizer_tracker(module: nn.Module, network_body) -> _Tracked:
-    """Changes of ``module``'s buffers, including numpy updates of its normalisers."""
-    steps = [n.normalization_steps.numpy() for n in normalizer_modules(network_body) if n is not None]
-    return _Tracked(module.buffers(), watch=steps)
 
 
 def body_normalizers(network_body) -> list:
     """(mean, std) float32 per input, or None for an input without normaliser."""
     normalizers = []
     with torch.no_grad():
-        for norm in normalizer_modules(network_body):
+        for norm in _normalizer_modules(network_body):
             if norm is None:
                 normalizers.append(None)
             else:
@@ -117,7 +106,7 @@ class NumpyCritic:
             raise ValueError("NumpyCritic handles vector observations only")
         self.critic = critic
         self._weights = _Tracked(critic.parameters())
-        self._normalizers = normalizer_tracker(critic, critic.network_body)
+        self._normalizers = _Tracked(critic.buffers())
 
     def __call__(self, obs: list[np.ndarray]) -> dict[str, np.ndarray]:
         """Value estimates per reward signal, float32 [n] each."""
@@ -138,7 +127,7 @@ class NumpyActor:
             raise ValueError("NumpyActor handles vector observations only")
         self.actor = actor
         self._weights = _Tracked(actor.parameters())
-        self._normalizers = normalizer_tracker(actor, actor.network_body)
+        self._normalizers = _Tracked(actor.buffers())
 
     def _refresh_weights(self) -> None:
         actor = self.actor

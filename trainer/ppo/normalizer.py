@@ -1,7 +1,6 @@
 """Running observation normaliser (ML-Agents ``normalize: true``), part of the exported graph."""
 from __future__ import annotations
 
-import numpy as np
 import torch
 from torch import nn
 
@@ -39,22 +38,3 @@ class Normalizer(nn.Module):
         self.running_mean.copy_(new_mean)
         self.normalization_steps.copy_(total_steps)
 
-    def update_numpy(self, batch: np.ndarray) -> None:
-        """``update`` in numpy, written in place into the buffers' shared memory (CPU only).
-
-        For the trainer's per-trajectory call on vector observations: a dozen tiny torch ops cost
-        ~10x their numpy equivalents. Same float32 formula; numpy writes do not bump torch's
-        version counters, but ``normalization_steps`` changes on every update, which is what the
-        numpy actor and critic watch (see ``fast_actor``).
-        """
-        mean = self.running_mean.numpy()
-        variance = self.running_variance.numpy()
-        steps = self.normalization_steps.numpy()
-        batch = np.asarray(batch, dtype=np.float32).reshape(-1, mean.shape[0])
-        total_steps = steps + batch.shape[0]
-        to_old_mean = batch - mean
-        new_mean = mean + (to_old_mean / np.float32(total_steps)).sum(0)
-        to_new_mean = batch - new_mean
-        variance += (to_new_mean * to_old_mean).sum(0)
-        mean[...] = new_mean
-        steps[...] = total_steps

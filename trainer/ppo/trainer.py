@@ -97,16 +97,11 @@ class PPOTrainer:
         """Normalise, estimate values, compute GAE per reward signal, and buffer the experiences."""
         length = len(traj)
         if self.hyperparams.normalize:
-            if self._numpy_critic is not None and self.policy.uses_numpy_actor:
-                # vector observations on the CPU: the same Welford step in numpy, in place
-                for module in (self.policy.actor, self.critic):
-                    for norm, obs in zip(fast_actor.normalizer_modules(module.network_body), traj.obs):
-                        if norm is not None:
-                            norm.update_numpy(obs)
-            else:
-                obs_tensors = self._tensors(traj.obs)
-                self.policy.actor.update_normalization(obs_tensors)
-                self.critic.update_normalization(obs_tensors)
+            # in torch, not numpy: the same float32 sums as ML-Agents (the interop test checks
+            # the statistics bit for bit); the numpy actor/critic re-read only the normalisers
+            obs_tensors = self._tensors(traj.obs)
+            self.policy.actor.update_normalization(obs_tensors)
+            self.critic.update_normalization(obs_tensors)
         values, next_values = self._value_estimates(traj)
         terminal = traj.done and not traj.interrupted
         fields: dict[str, np.ndarray] = {_obs_key(i): np.asarray(o, np.float32) for i, o in enumerate(traj.obs)}
