@@ -176,6 +176,7 @@ def steps_from_agent_infos(
     if fast is not None:
         reward, group_reward, agent_id = fast.reward, fast.group_reward, fast.agent_id
         group_id, done, max_step = fast.group_id, fast.done, fast.max_step
+        _require_finite_rewards(behavior_name, reward, group_reward, agent_id)
         for index, (stacked, obs_spec) in enumerate(zip(fast.obs, spec.observation_specs)):
             _require_finite(stacked, behavior_name, f"observation {index} ({obs_spec.name})", agent_id)
         obs = fast.obs
@@ -187,15 +188,13 @@ def steps_from_agent_infos(
         reward, group_reward = floats[:, 0], floats[:, 1]
         agent_id, group_id = scalars[:, 2].astype(np.int64), scalars[:, 3].astype(np.int32)
         done, max_step = scalars[:, 4] != 0, scalars[:, 5] != 0
+        _require_finite_rewards(behavior_name, reward, group_reward, agent_id)
         all_obs = list(map(_OBSERVATIONS, agent_infos))
         obs = [
             _stack_observation(behavior_name, index, obs_spec, all_obs, agent_id)
             for index, obs_spec in enumerate(spec.observation_specs)
         ]
         mask_matrix = _mask_matrix(agent_infos, int(sum(branches))) if branches else None
-    if not (np.isfinite(reward).all() and np.isfinite(group_reward).all()):
-        _require_finite(reward, behavior_name, "reward", agent_id)
-        _require_finite(group_reward, behavior_name, "group_reward", agent_id)
     if not done.any():  # the common message: nobody finished, no boolean indexing needed
         decision = DecisionSteps(
             obs=obs,
@@ -224,6 +223,13 @@ def steps_from_agent_infos(
         group_reward=group_reward[done],
     )
     return decision, terminal
+
+
+def _require_finite_rewards(behavior: str, reward: np.ndarray, group_reward: np.ndarray,
+                            agent_id: np.ndarray) -> None:
+    if not (np.isfinite(reward).all() and np.isfinite(group_reward).all()):
+        _require_finite(reward, behavior, "reward", agent_id)
+        _require_finite(group_reward, behavior, "group_reward", agent_id)
 
 
 @functools.lru_cache(maxsize=64)
