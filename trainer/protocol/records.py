@@ -55,6 +55,24 @@ def _varint(data: bytes, pos: int, end: int) -> tuple[int, int]:
         shift += 7
 
 
+def _key(record: bytes, pos: int, end: int, fixed: list[int]) -> tuple[int, int, int]:
+    """(field number, wire type, position after the key); the key's bytes are fixed."""
+    start = pos
+    key, pos = _varint(record, pos, end)
+    fixed.extend(range(start, pos))
+    return key >> 3, key & 7, pos
+
+
+def _length(record: bytes, pos: int, end: int, fixed: list[int]) -> tuple[int, int]:
+    """A length prefix (fixed bytes) → (content start, content end)."""
+    start = pos
+    size, pos = _varint(record, pos, end)
+    fixed.extend(range(start, pos))
+    if pos + size > end:
+        raise _Unsupported("truncated field")
+    return pos, pos + size
+
+
 class _Checked:
     """A walked record's fixed bytes and varint value bytes, checked against many rows at once."""
 
@@ -83,10 +101,7 @@ class _Layout(_Checked):
         self.obs: list[tuple[tuple[int, ...], int, int]] = []  # (shape, first column, floats)
         pos, end = 0, len(record)
         while pos < end:
-            start = pos
-            key, pos = _varint(record, pos, end)
-            fixed.extend(range(start, pos))
-            field, wire_type = key >> 3, key & 7
+            field, wire_type, pos = _key(record, pos, end, fixed)
             if wire_type == 0:
                 start = pos
                 _, pos = _varint(record, pos, end)
@@ -115,16 +130,11 @@ class _Layout(_Checked):
                 fixed.extend(range(pos, pos + 8))
                 pos += 8
             elif wire_type == 2:
-                start = pos
-                size, pos = _varint(record, pos, end)
-                fixed.extend(range(start, pos))
-                content_end = pos + size
-                if content_end > end:
-                    raise _Unsupported("truncated field")
+                pos, content_end = _length(record, pos, end, fixed)
                 if field == _MASK:
                     if self.mask is not None or any(b >= 0x80 for b in record[pos:content_end]):
                         raise _Unsupported("split or multi-byte mask")
-                    self.mask = (pos, size)
+                    self.mask = (pos, content_end - pos)
                     cont.extend(range(pos, content_end))
                 elif field == _OBSERVATIONS:
                     self.obs.append(_observation_layout(record, pos, content_end, fixed))
@@ -148,19 +158,14 @@ class _ActionLayout(_Checked):
         seen: set[int] = set()
         pos, end = 0, len(record)
         while pos < end:
-            start = pos
-            key, pos = _varint(record, pos, end)
-            fixed.extend(range(start, pos))
-            field, wire_type = key >> 3, key & 7
+            field, wire_type, pos = _key(record, pos, end, fixed)
             if field in seen and field in (1, 4, 6, 7):
                 raise _Unsupported("field split or repeated")
             seen.add(field)
             if wire_type == 2:
-                start = pos
-                size, pos = _varint(record, pos, end)
-                fixed.extend(range(start, pos))
-                content_end = pos + size
-                if content_end > end or (field in (1, 6) and size % 4):
+                pos, content_end = _length(record, pos, end, fixed)
+                size = content_end - pos
+                if field in (1, 6) and size % 4:
                     raise _Unsupported("bad packed field")
                 if field == 6:
                     self.continuous = (pos, size // 4)
@@ -197,10 +202,7 @@ def _observation_layout(record: bytes, pos: int, end: int, fixed: list[int]):
     shape: tuple[int, ...] = ()
     payload: tuple[int, int] | None = None
     while pos < end:
-        start = pos
-        key, pos = _varint(record, pos, end)
-        fixed.extend(range(start, pos))
-        field, wire_type = key >> 3, key & 7
+        field, wire_type, pos = _key(record, pos, end, fixed)
         if field in (_COMPRESSED_DATA,) or (field == _SHAPE and wire_type != 2):
             raise _Unsupported("compressed or unpacked observation")
         if wire_type == 0:
@@ -210,12 +212,7 @@ def _observation_layout(record: bytes, pos: int, end: int, fixed: list[int]):
                 raise _Unsupported("compressed observation")
             fixed.extend(range(start, pos))
         elif wire_type == 2:
-            start = pos
-            size, pos = _varint(record, pos, end)
-            fixed.extend(range(start, pos))
-            content_end = pos + size
-            if content_end > end:
-                raise _Unsupported("truncated field")
+            pos, content_end = _length(record, pos, end, fixed)
             if field == _SHAPE:
                 dims, p = [], pos
                 while p < content_end:
@@ -243,18 +240,14 @@ def _observation_layout(record: bytes, pos: int, end: int, fixed: list[int]):
 def _float_data_layout(record: bytes, pos: int, end: int, fixed: list[int]) -> tuple[int, int]:
     payload = None
     while pos < end:
-        start = pos
-        key, pos = _varint(record, pos, end)
-        fixed.extend(range(start, pos))
-        if key != (1 << 3 | 2) or payload is not None:
+        field, wire_type, pos = _key(record, pos, end, fixed)
+        if (field, wire_type) != (1, 2) or payload is not None:
             raise _Unsupported("unexpected FloatData content")
-        start = pos
-        size, pos = _varint(record, pos, end)
-        fixed.extend(range(start, pos))
-        if size % 4 or pos + size > end:
+        pos, content_end = _length(record, pos, end, fixed)
+        if (content_end - pos) % 4:
             raise _Unsupported("bad float payload")
-        payload = (pos, size // 4)
-        pos += size
+        payload = (pos, (content_end - pos) // 4)
+        pos = content_end
     return payload if payload is not None else (0, 0)
 
 
