@@ -338,3 +338,50 @@ def test_communication_version_table(version, ok):
 def test_capabilities_all_true():
     caps = codec.all_true_capabilities()
     assert [getattr(caps, f.name) for f in caps.DESCRIPTOR.fields] == [True] * 7
+
+
+# ------------------------------------------------------------------ few agents: the plain-Python path
+def _both_small_paths(monkeypatch, infos, spec):
+    lst = output_with({"B": infos}, [brain_params("B", spec.action_spec.continuous_size,
+                                                    spec.action_spec.discrete_branches)]).rl_output.agentInfos["B"]
+    taken = []
+    real = codec._few_deciding_agents
+    monkeypatch.setattr(codec, "_few_deciding_agents", lambda *a: taken.append(real(*a)) or taken[-1])
+    few = codec.steps_from_agent_infos("B", lst.value, spec, lst)
+    monkeypatch.setattr(codec, "_FEW_AGENTS", 0)
+    general = codec.steps_from_agent_infos("B", lst.value, spec, lst)
+    monkeypatch.setattr(codec, "_FEW_AGENTS", 8)
+    return few, general, taken and taken[0] is not None
+
+
+def test_few_deciding_agents_decode_like_the_general_path(monkeypatch):
+    spec = BehaviorSpec((ObservationSpec((3,), (P.NONE,), ObservationType.DEFAULT, "a"),
+                         ObservationSpec((2,), (P.NONE,), ObservationType.DEFAULT, "b")), ActionSpec(1, (2, 3)))
+    infos = [agent_info(7, obs=[[1, 2, 3], [4, 5]], reward=0.5, mask=[False, True, True, False, False]),
+             agent_info(-3, obs=[[0.25, 0, -1], [9, 8]], reward=-1.5, group_id=4, group_reward=2.0),
+             agent_info(2**31 - 1, obs=[[7, 7, 7], [6, 6]], mask=[True, True])]  # wrong width: nothing masked
+    few, general, taken = _both_small_paths(monkeypatch, infos, spec)
+    assert taken
+    for a, b in zip(few[0].obs + [few[0].reward, few[0].agent_id, few[0].group_id, few[0].group_reward] + few[0].action_mask,
+                    general[0].obs + [general[0].reward, general[0].agent_id, general[0].group_id, general[0].group_reward]
+                    + general[0].action_mask):
+        assert a.dtype == b.dtype and a.shape == b.shape
+        np.testing.assert_array_equal(a, b)
+    assert few[0].agent_id.tolist() == [7, -3, 2**31 - 1] and few[0].reward.tolist() == [0.5, -1.5, 0.0]
+    assert few[0].action_mask[0].tolist() == [[False, True], [False, False], [False, False]]
+    assert len(few[1]) == 0
+
+
+@pytest.mark.parametrize("case", ["done", "nan_reward", "inf_obs", "short_obs"])
+def test_few_agents_step_aside_for_the_general_path(monkeypatch, case):
+    spec = BehaviorSpec((ObservationSpec((3,), (P.NONE,), ObservationType.DEFAULT, "a"),), ActionSpec(1, ()))
+    kwargs = {"done": {"done": True}, "nan_reward": {"reward": float("nan")},
+              "inf_obs": {"obs": [[1, float("inf"), 3]]}, "short_obs": {"obs": [[1, 2]]}}[case]
+    kwargs.setdefault("obs", [[1, 2, 3]])
+    infos = [agent_info(1, obs=[[0, 0, 0]]), agent_info(42, **kwargs)]
+    if case == "done":
+        few, general, taken = _both_small_paths(monkeypatch, infos, spec)
+        assert not taken and len(few[1]) == 1 and few[1].agent_id.tolist() == [42]
+        return
+    with pytest.raises(ProtocolError, match="agent id 42"):
+        _both_small_paths(monkeypatch, infos, spec)

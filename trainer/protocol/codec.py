@@ -168,6 +168,10 @@ def steps_from_agent_infos(
     bytes at once (``records``); agent by agent otherwise, or when that does not apply.
     """
     n = len(agent_infos)
+    if n < _FEW_AGENTS:
+        steps = _few_deciding_agents(agent_infos, spec)
+        if steps is not None:
+            return steps
     branches = spec.action_spec.discrete_branches
     fast = None
     if agent_info_list is not None and n >= records.MIN_ROWS:
@@ -223,6 +227,51 @@ def steps_from_agent_infos(
         group_reward=group_reward[done],
     )
     return decision, terminal
+
+
+_FEW_AGENTS = 8  # below this, per-agent Python beats numpy's per-call cost (measured)
+_FIELD = operator.attrgetter("float_data")
+
+
+def _few_deciding_agents(agent_infos: Sequence, spec: BehaviorSpec):
+    """``steps_from_agent_infos`` for a handful of agents that all ask for a decision, with
+    rank-1 float observations: plain Python checks instead of a dozen numpy reductions (one
+    basic agent: ~100 -> ~35 us). None when anything else holds (a finished agent, a
+    non-finite value, another shape): the general path then decodes the message, and reports."""
+    rows = list(map(_SCALAR_FIELDS, agent_infos))
+    for reward, group_reward, _, _, done, _ in rows:
+        if done or not (math.isfinite(reward) and math.isfinite(group_reward)):
+            return None
+    obs = []
+    for index, obs_spec in enumerate(spec.observation_specs):
+        if len(obs_spec.shape) != 1:
+            return None
+        try:
+            values = [_FIELD(a.observations[index]).data for a in agent_infos]
+        except IndexError:
+            return None
+        if any(len(v) != obs_spec.shape[0] for v in values):
+            return None
+        stacked = np.array(values, dtype=np.float32).reshape(len(rows), obs_spec.shape[0])
+        if not math.isfinite(float(stacked.sum(dtype=np.float64))):  # NaN/Inf propagate into the sum
+            return None
+        obs.append(stacked)
+    branches = spec.action_spec.discrete_branches
+    masks = None
+    if branches:
+        total = int(sum(branches))
+        masks = _split_branches(np.array([list(a.action_mask) if len(a.action_mask) == total else [False] * total
+                                          for a in agent_infos], dtype=bool).reshape(len(rows), total), branches)
+    columns = list(zip(*rows))
+    decision = DecisionSteps(
+        obs=obs,
+        reward=np.array(columns[0], dtype=np.float32),
+        agent_id=np.array(columns[2], dtype=np.int64),
+        action_mask=masks,
+        group_id=np.array(columns[3], dtype=np.int32),
+        group_reward=np.array(columns[1], dtype=np.float32),
+    )
+    return decision, _empty_terminal(spec)
 
 
 def _require_finite_rewards(behavior: str, reward: np.ndarray, group_reward: np.ndarray,
