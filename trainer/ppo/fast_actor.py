@@ -62,16 +62,15 @@ def body_normalizers(network_body) -> list:
     return normalizers
 
 
+def _linear(module: nn.Linear) -> tuple[np.ndarray, np.ndarray]:
+    """(W^T, b) of a Linear layer as numpy copies."""
+    with torch.no_grad():
+        return module.weight.detach().numpy().T.copy(), module.bias.detach().numpy().copy()
+
+
 def body_layers(network_body) -> list:
     """(W^T, b) per hidden Linear, as numpy copies."""
-    with torch.no_grad():
-        return [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy())
-                for m in network_body.hidden if isinstance(m, nn.Linear)]
-
-
-def body_arrays(network_body) -> tuple[list, list]:
-    """(normalizers: (mean, std) or None per input, layers: (W^T, b) per hidden Linear) as numpy."""
-    return body_normalizers(network_body), body_layers(network_body)
+    return [_linear(m) for m in network_body.hidden if isinstance(m, nn.Linear)]
 
 
 def body_input(obs: list[np.ndarray], normalizers: list) -> np.ndarray:
@@ -97,58 +96,56 @@ def body_forward(obs: list[np.ndarray], normalizers: list, layers: list) -> np.n
     return h
 
 
-class NumpyCritic:
-    """The critic's forward pass in numpy (value estimates while processing trajectories),
-    refreshed from the torch critic whenever any of its tensors changed."""
+class _NumpyCopy:
+    """A torch module's hidden layers and normalisers as numpy copies, kept in step with it:
+    weights re-copied when a parameter changed, normaliser mean/std when a buffer changed."""
 
-    def __init__(self, critic: Critic) -> None:
-        if not supports(critic):
-            raise ValueError("NumpyCritic handles vector observations only")
-        self.critic = critic
-        self._weights = _Tracked(critic.parameters())
-        self._normalizers = _Tracked(critic.buffers())
+    def __init__(self, module: Actor | Critic) -> None:
+        if not supports(module):
+            raise ValueError(f"{type(self).__name__} handles vector observations only")
+        self.module = module
+        self._weights = _Tracked(module.parameters())
+        self._normalizers = _Tracked(module.buffers())
+
+    def _copy_heads(self) -> None:
+        """Copy the output layers (subclasses); called with every weight re-copy."""
+
+    def _hidden(self, obs: list[np.ndarray]) -> np.ndarray:
+        """Refresh what changed, then the last hidden layer's output [n, hidden]."""
+        if self._weights.stale():
+            self.layers = body_layers(self.module.network_body)
+            self._copy_heads()
+        if self._normalizers.stale():
+            self.normalizers = body_normalizers(self.module.network_body)
+        return body_forward(obs, self.normalizers, self.layers)
+
+
+class NumpyCritic(_NumpyCopy):
+    """The critic's forward pass in numpy (value estimates while processing trajectories)."""
+
+    def _copy_heads(self) -> None:
+        self.heads = {name: _linear(head) for name, head in self.module.value_heads.items()}
 
     def __call__(self, obs: list[np.ndarray]) -> dict[str, np.ndarray]:
         """Value estimates per reward signal, float32 [n] each."""
-        if self._weights.stale():
-            self.layers = body_layers(self.critic.network_body)
-            with torch.no_grad():
-                self.heads = {name: (head.weight.detach().numpy().T.copy(), head.bias.detach().numpy().copy())
-                              for name, head in self.critic.value_heads.items()}
-        if self._normalizers.stale():
-            self.normalizers = body_normalizers(self.critic.network_body)
-        h = body_forward(obs, self.normalizers, self.layers)
+        h = self._hidden(obs)
         return {name: (h @ weight + bias)[:, 0] for name, (weight, bias) in self.heads.items()}
 
 
-class NumpyActor:
-    def __init__(self, actor: Actor):
-        if not supports(actor):
-            raise ValueError("NumpyActor handles vector observations only")
-        self.actor = actor
-        self._weights = _Tracked(actor.parameters())
-        self._normalizers = _Tracked(actor.buffers())
-
-    def _refresh_weights(self) -> None:
-        actor = self.actor
-        self.layers = body_layers(actor.network_body)
-        with torch.no_grad():
-            self.mu = None
-            if actor.mu is not None:
-                self.mu = (actor.mu.weight.detach().numpy().T.copy(), actor.mu.bias.detach().numpy().copy())
-                self.log_sigma = actor.log_sigma.detach().numpy().astype(np.float32).copy()
-            self.branches = [(b.weight.detach().numpy().T.copy(), b.bias.detach().numpy().copy())
-                             for b in actor.discrete_branches]
-            self.offsets = list(actor._mask_offsets)
+class NumpyActor(_NumpyCopy):
+    def _copy_heads(self) -> None:
+        actor = self.module
+        self.mu = None
+        if actor.mu is not None:
+            self.mu = _linear(actor.mu)
+            self.log_sigma = actor.log_sigma.detach().numpy().astype(np.float32).copy()
+        self.branches = [_linear(b) for b in actor.discrete_branches]
+        self.offsets = list(actor._mask_offsets)
 
     def heads(self, obs: list[np.ndarray], allowed: np.ndarray | None
               ) -> tuple[np.ndarray | None, list[np.ndarray]]:
         """mu [n, c] or None, and masked logits [n, k_b] per branch (allowed: float [n, sum], 1 = allowed)."""
-        if self._weights.stale():
-            self._refresh_weights()
-        if self._normalizers.stale():
-            self.normalizers = body_normalizers(self.actor.network_body)
-        h = body_forward(obs, self.normalizers, self.layers)
+        h = self._hidden(obs)
         mu = h @ self.mu[0] + self.mu[1] if self.mu is not None else None
         logits = []
         for index, (weight, bias) in enumerate(self.branches):
