@@ -7,7 +7,6 @@ this module does I/O or keeps state.
 from __future__ import annotations
 
 import functools
-import itertools
 import math
 import operator
 import re
@@ -155,6 +154,7 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec]) -> StepRes
 _SCALAR_FIELDS = operator.attrgetter("reward", "group_reward", "id", "group_id", "done", "max_step_reached")
 _OBSERVATIONS = operator.attrgetter("observations")
 _FLOAT_DATA = operator.attrgetter("float_data")
+_ACTION_MASK = operator.attrgetter("action_mask")
 _SERIALIZE = operator.methodcaller("SerializeToString")
 
 
@@ -163,115 +163,111 @@ def steps_from_agent_infos(
 ) -> tuple[DecisionSteps, TerminalSteps]:
     """Split n AgentInfoProtos into DecisionSteps (done=false) and TerminalSteps (done=true).
 
-    Relative order is kept. Shapes as in ``trainer.protocol.types``. ``agent_info_list`` (the
-    ListAgentInfoProto holding ``agent_infos``) lets many agents be decoded from its serialized
-    bytes at once (``records``); agent by agent otherwise, or when that does not apply.
+    Relative order is kept. Shapes as in ``trainer.protocol.types``. Three decoders give the same
+    fields: plain Python for a few deciding agents; for many, their serialized bytes at once
+    (``records``, needs ``agent_info_list``, the ListAgentInfoProto holding ``agent_infos``);
+    agent by agent for everything else, which also words the errors.
     """
     n = len(agent_infos)
-    if n < _FEW_AGENTS:
-        steps = _few_deciding_agents(agent_infos, spec)
-        if steps is not None:
-            return steps
+    fields = _few_deciding_agents(agent_infos, spec) if n < _FEW_AGENTS else None
+    if fields is None and agent_info_list is not None and n >= records.MIN_ROWS:
+        fields = records.decode(behavior_name, agent_info_list.SerializeToString(),
+                                [tuple(o.shape) for o in spec.observation_specs],
+                                int(sum(spec.action_spec.discrete_branches)))
+        if fields is not None:
+            _require_finite_rewards(behavior_name, fields.reward, fields.group_reward, fields.agent_id)
+            for index, (stacked, obs_spec) in enumerate(zip(fields.obs, spec.observation_specs)):
+                _require_finite(stacked, behavior_name, f"observation {index} ({obs_spec.name})", fields.agent_id)
+    if fields is None:
+        fields = _agent_by_agent(behavior_name, agent_infos, spec)
+    return _split_steps(fields, spec)
+
+
+def _agent_by_agent(behavior_name: str, agent_infos: Sequence, spec: BehaviorSpec) -> records.Decoded:
+    """The fields of every agent, read through the protobuf objects; raises ProtocolError."""
+    n = len(agent_infos)
+    # one pass over the protos; float64 holds float32 rewards and int32 ids exactly
+    scalars = np.array(list(map(_SCALAR_FIELDS, agent_infos)), dtype=np.float64).reshape(n, 6)
+    floats = scalars[:, :2].astype(np.float32)
+    agent_id = scalars[:, 2].astype(np.int64)
+    _require_finite_rewards(behavior_name, floats[:, 0], floats[:, 1], agent_id)
+    all_obs = list(map(_OBSERVATIONS, agent_infos))
+    return records.Decoded(
+        reward=floats[:, 0], group_reward=floats[:, 1], agent_id=agent_id,
+        group_id=scalars[:, 3].astype(np.int32), done=scalars[:, 4] != 0, max_step=scalars[:, 5] != 0,
+        obs=[_stack_observation(behavior_name, index, obs_spec, all_obs, agent_id)
+             for index, obs_spec in enumerate(spec.observation_specs)],
+        mask=_mask_matrix(agent_infos, int(sum(spec.action_spec.discrete_branches))),
+    )
+
+
+def _split_steps(fields: records.Decoded, spec: BehaviorSpec) -> tuple[DecisionSteps, TerminalSteps]:
     branches = spec.action_spec.discrete_branches
-    fast = None
-    if agent_info_list is not None and n >= records.MIN_ROWS:
-        fast = records.decode(behavior_name, agent_info_list.SerializeToString(),
-                              [tuple(o.shape) for o in spec.observation_specs], int(sum(branches)))
-    if fast is not None:
-        reward, group_reward, agent_id = fast.reward, fast.group_reward, fast.agent_id
-        group_id, done, max_step = fast.group_id, fast.done, fast.max_step
-        _require_finite_rewards(behavior_name, reward, group_reward, agent_id)
-        for index, (stacked, obs_spec) in enumerate(zip(fast.obs, spec.observation_specs)):
-            _require_finite(stacked, behavior_name, f"observation {index} ({obs_spec.name})", agent_id)
-        obs = fast.obs
-        mask_matrix = fast.mask if branches else None
-    else:
-        # one pass over the protos; float64 holds float32 rewards and int32 ids exactly
-        scalars = np.array(list(map(_SCALAR_FIELDS, agent_infos)), dtype=np.float64).reshape(n, 6)
-        floats = scalars[:, :2].astype(np.float32)
-        reward, group_reward = floats[:, 0], floats[:, 1]
-        agent_id, group_id = scalars[:, 2].astype(np.int64), scalars[:, 3].astype(np.int32)
-        done, max_step = scalars[:, 4] != 0, scalars[:, 5] != 0
-        _require_finite_rewards(behavior_name, reward, group_reward, agent_id)
-        all_obs = list(map(_OBSERVATIONS, agent_infos))
-        obs = [
-            _stack_observation(behavior_name, index, obs_spec, all_obs, agent_id)
-            for index, obs_spec in enumerate(spec.observation_specs)
-        ]
-        mask_matrix = _mask_matrix(agent_infos, int(sum(branches))) if branches else None
+    done = fields.done
     if not done.any():  # the common message: nobody finished, no boolean indexing needed
         decision = DecisionSteps(
-            obs=obs,
-            reward=reward.copy(),
-            agent_id=agent_id,
-            action_mask=_split_branches(mask_matrix, branches),
-            group_id=group_id,
-            group_reward=group_reward.copy(),
+            obs=fields.obs,
+            reward=fields.reward.copy(),
+            agent_id=fields.agent_id,
+            action_mask=_split_branches(fields.mask, branches),
+            group_id=fields.group_id,
+            group_reward=fields.group_reward.copy(),
         )
         return decision, _empty_terminal(spec)
     deciding = ~done
     decision = DecisionSteps(
-        obs=[o[deciding] for o in obs],
-        reward=reward[deciding],
-        agent_id=agent_id[deciding],
-        action_mask=_split_branches(None if mask_matrix is None else mask_matrix[deciding], branches),
-        group_id=group_id[deciding],
-        group_reward=group_reward[deciding],
+        obs=[o[deciding] for o in fields.obs],
+        reward=fields.reward[deciding],
+        agent_id=fields.agent_id[deciding],
+        action_mask=_split_branches(fields.mask[deciding], branches),
+        group_id=fields.group_id[deciding],
+        group_reward=fields.group_reward[deciding],
     )
     terminal = TerminalSteps(
-        obs=[o[done] for o in obs],
-        reward=reward[done],
-        interrupted=max_step[done],
-        agent_id=agent_id[done],
-        group_id=group_id[done],
-        group_reward=group_reward[done],
+        obs=[o[done] for o in fields.obs],
+        reward=fields.reward[done],
+        interrupted=fields.max_step[done],
+        agent_id=fields.agent_id[done],
+        group_id=fields.group_id[done],
+        group_reward=fields.group_reward[done],
     )
     return decision, terminal
 
 
 _FEW_AGENTS = 8  # below this, per-agent Python beats numpy's per-call cost (measured)
-_FIELD = operator.attrgetter("float_data")
 
 
-def _few_deciding_agents(agent_infos: Sequence, spec: BehaviorSpec):
-    """``steps_from_agent_infos`` for a handful of agents that all ask for a decision, with
-    rank-1 float observations: plain Python checks instead of a dozen numpy reductions (one
-    basic agent: ~100 -> ~35 us). None when anything else holds (a finished agent, a
-    non-finite value, another shape): the general path then decodes the message, and reports."""
+def _few_deciding_agents(agent_infos: Sequence, spec: BehaviorSpec) -> records.Decoded | None:
+    """The fields of a handful of agents that all ask for a decision, with rank-1 float
+    observations: plain Python checks instead of a dozen numpy reductions (one basic agent:
+    ~100 -> ~45 us). None when anything else holds (a finished agent, a non-finite value,
+    another shape): the other decoders then take the message, and report."""
     rows = list(map(_SCALAR_FIELDS, agent_infos))
     for reward, group_reward, _, _, done, _ in rows:
         if done or not (math.isfinite(reward) and math.isfinite(group_reward)):
             return None
+    n = len(rows)
     obs = []
     for index, obs_spec in enumerate(spec.observation_specs):
         if len(obs_spec.shape) != 1:
             return None
         try:
-            values = [_FIELD(a.observations[index]).data for a in agent_infos]
+            values = [_FLOAT_DATA(a.observations[index]).data for a in agent_infos]
         except IndexError:
             return None
         if any(len(v) != obs_spec.shape[0] for v in values):
             return None
-        stacked = np.array(values, dtype=np.float32).reshape(len(rows), obs_spec.shape[0])
+        stacked = np.array(values, dtype=np.float32).reshape(n, obs_spec.shape[0])
         if not math.isfinite(float(stacked.sum(dtype=np.float64))):  # NaN/Inf propagate into the sum
             return None
         obs.append(stacked)
-    branches = spec.action_spec.discrete_branches
-    masks = None
-    if branches:
-        total = int(sum(branches))
-        masks = _split_branches(np.array([list(a.action_mask) if len(a.action_mask) == total else [False] * total
-                                          for a in agent_infos], dtype=bool).reshape(len(rows), total), branches)
     columns = list(zip(*rows))
-    decision = DecisionSteps(
-        obs=obs,
-        reward=np.array(columns[0], dtype=np.float32),
-        agent_id=np.array(columns[2], dtype=np.int64),
-        action_mask=masks,
-        group_id=np.array(columns[3], dtype=np.int32),
-        group_reward=np.array(columns[1], dtype=np.float32),
+    return records.Decoded(
+        reward=np.array(columns[0], dtype=np.float32), group_reward=np.array(columns[1], dtype=np.float32),
+        agent_id=np.array(columns[2], dtype=np.int64), group_id=np.array(columns[3], dtype=np.int32),
+        done=np.zeros(n, dtype=bool), max_step=np.zeros(n, dtype=bool), obs=obs,
+        mask=_mask_matrix(agent_infos, int(sum(spec.action_spec.discrete_branches))),
     )
-    return decision, _empty_terminal(spec)
 
 
 def _require_finite_rewards(behavior: str, reward: np.ndarray, group_reward: np.ndarray,
@@ -375,16 +371,14 @@ def _stack_visual(
 def _mask_matrix(agent_infos: Sequence, total: int) -> np.ndarray:
     """bool [n, total], True = masked. A mask whose length is not ``total`` (the sum of the
     branch sizes) is ignored: nothing masked for that agent."""
-    masks = [a.action_mask for a in agent_infos]
-    matrix = np.zeros((len(masks), total), dtype=bool)
-    rows = [row for row, mask in enumerate(masks) if len(mask) == total]
-    if rows:
-        flat = itertools.chain.from_iterable(masks[row] for row in rows)
-        matrix[rows] = np.fromiter(flat, dtype=bool, count=len(rows) * total).reshape(-1, total)
-    return matrix
+    if total == 0:
+        return np.zeros((len(agent_infos), 0), dtype=bool)
+    nothing = [False] * total
+    rows = [list(mask) if len(mask) == total else nothing for mask in map(_ACTION_MASK, agent_infos)]
+    return np.array(rows, dtype=bool).reshape(len(rows), total)
 
 
-def _split_branches(matrix: np.ndarray | None, branches: tuple[int, ...]) -> list[np.ndarray] | None:
+def _split_branches(matrix: np.ndarray, branches: tuple[int, ...]) -> list[np.ndarray] | None:
     """Per branch bool [n, branch_size]; None without discrete branches."""
     if not branches:
         return None
