@@ -141,18 +141,19 @@ class RunState:
         specs = self.pool.behavior_specs() if by_behavior else {}
         for behavior, env_ids in by_behavior.items():
             runner = self.ensure_runner(behavior, specs[behavior])
-            steps = [(env_id, *results[env_id].steps[behavior]) for env_id in env_ids]
-            deciding = [decision for _, decision, _ in steps if len(decision)]
+            # each env's deciding agents are the rows [start, end) of the one batched forward pass
+            steps, start = [], 0
+            for env_id in env_ids:
+                decision, terminal = results[env_id].steps[behavior]
+                steps.append((env_id, decision, terminal, slice(start, start + len(decision))))
+                start += len(decision)
             out = masks = None
-            if deciding:
-                out, masks = self._act(runner, deciding)
-                start = 0
-                for env_id, decision, _ in steps:
+            if start:
+                out, masks = self._act(runner, [decision for _, decision, _, _ in steps if len(decision)])
+                for env_id, decision, _, rows in steps:
                     if len(decision):
-                        end = start + len(decision)
-                        actions[env_id][behavior] = ActionTuple(out.env_actions.continuous[start:end],
-                                                                out.env_actions.discrete[start:end])
-                        start = end
+                        actions[env_id][behavior] = ActionTuple(out.env_actions.continuous[rows],
+                                                                out.env_actions.discrete[rows])
             decided.append((runner, behavior, steps, out, masks))
         return actions, decided
 
@@ -176,8 +177,7 @@ class RunState:
         ``trajectories``, the new observations and actions remembered, episode statistics."""
         for runner, behavior, steps, out, masks in decided:
             emit = lambda t, r=runner: trajectories.append((r, t))  # noqa: E731
-            start = 0
-            for env_id, decision, terminal in steps:
+            for env_id, decision, terminal, rows in steps:
                 tracker = self.trackers.get((env_id, behavior))
                 if tracker is None:
                     tracker = AgentTracker(runner.spec, runner.settings.time_horizon)
@@ -187,10 +187,8 @@ class RunState:
                 runner.add_episodes(tracker.episodes.rewards)
                 self._episode_stats(runner.brain, tracker)
                 if len(decision):
-                    end = start + len(decision)
-                    tracker.on_actions(slots, out.continuous_raw[start:end], out.discrete[start:end],
-                                       out.log_probs[start:end], None if masks is None else masks[start:end])
-                    start = end
+                    tracker.on_actions(slots, out.continuous_raw[rows], out.discrete[rows],
+                                       out.log_probs[rows], None if masks is None else masks[rows])
 
     def _episode_stats(self, brain: str, tracker: AgentTracker) -> None:
         eps = tracker.drain_episodes()
