@@ -19,6 +19,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from trainer.ppo.distributions import EPSILON
 from trainer.ppo.encoders import VectorInput
 from trainer.ppo.networks import Actor, Critic
 
@@ -138,7 +139,11 @@ class NumpyActor(_NumpyCopy):
         self.mu = None
         if actor.mu is not None:
             self.mu = _linear(actor.mu)
-            self.log_sigma = actor.log_sigma.detach().numpy().astype(np.float32).copy()
+            # what the Gaussian's log-prob and entropy need of log_sigma, once per weight change:
+            # sigma [1, c], 2 sigma^2 + eps, log(sigma + eps), the mean entropy
+            sigma = np.exp(actor.log_sigma.detach().numpy().astype(np.float32))
+            self.gaussian = (sigma, 2 * sigma**2 + EPSILON, np.log(sigma + EPSILON),
+                             np.mean(0.5 * np.log(2 * np.pi * np.e * sigma**2 + EPSILON)))
         self.branches = [_linear(b) for b in actor.discrete_branches]
         self.offsets = list(actor._mask_offsets)
 

@@ -62,7 +62,6 @@ class Policy:
         # vector-only actors on the CPU decide in numpy (see fast_actor for why)
         use_numpy = self.device.type == "cpu" and fast_actor.supports(self.actor)
         self._numpy_actor = fast_actor.NumpyActor(self.actor) if use_numpy else None
-        self._gaussian_cache = None
 
     @property
     def uses_numpy_actor(self) -> bool:
@@ -132,7 +131,7 @@ class Policy:
         entropy = np.zeros(n, dtype=np.float32)
         raw = np.zeros((n, 0), dtype=np.float32)
         if mu is not None:
-            sigma, variance_term, log_term, gaussian_entropy_mean = self._gaussian_constants()
+            sigma, variance_term, log_term, gaussian_entropy_mean = self._numpy_actor.gaussian
             if deterministic:
                 raw = mu
             else:
@@ -165,19 +164,6 @@ class Policy:
             log_probs=np.concatenate(log_parts, axis=1).astype(np.float32),
             entropy=entropy.astype(np.float32),
         )
-
-    def _gaussian_constants(self):
-        """sigma, 2 sigma^2 + eps, log(sigma + eps) and the mean Gaussian entropy: they depend
-        on log_sigma only, so they are computed once per weight change, not per decision (the
-        same expressions as before, so the same float32 values)."""
-        log_sigma = self._numpy_actor.log_sigma
-        cached = self._gaussian_cache
-        if cached is None or cached[0] is not log_sigma:
-            sigma = np.exp(log_sigma)  # [1, c]
-            cached = (log_sigma, sigma, 2 * sigma**2 + EPSILON, np.log(sigma + EPSILON),
-                      np.mean(0.5 * np.log(2 * np.pi * np.e * sigma**2 + EPSILON)))
-            self._gaussian_cache = cached
-        return cached[1:]
 
     def evaluate(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None,
                  continuous_actions: torch.Tensor, discrete_actions: torch.Tensor
