@@ -63,10 +63,6 @@ class Policy:
         use_numpy = self.device.type == "cpu" and fast_actor.supports(self.actor)
         self._numpy_actor = fast_actor.NumpyActor(self.actor) if use_numpy else None
 
-    @property
-    def uses_numpy_actor(self) -> bool:
-        return self._numpy_actor is not None
-
     def _to_tensors(self, obs: Sequence[np.ndarray]) -> list[torch.Tensor]:
         return [torch.as_tensor(np.asarray(o, dtype=np.float32), device=self.device) for o in obs]
 
