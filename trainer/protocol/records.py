@@ -73,6 +73,19 @@ def _length(record: bytes, pos: int, end: int, fixed: list[int]) -> tuple[int, i
     return pos, pos + size
 
 
+_WIDTHS = {1: 8, 5: 4}  # wire type -> bytes of a fixed64 / fixed32 value
+
+
+def _scalar(record: bytes, pos: int, end: int, wire_type: int) -> tuple[int, int]:
+    """(start, end) of a value that is not length-delimited: varint, fixed64 or fixed32."""
+    if wire_type == 0:
+        return pos, _varint(record, pos, end)[1]
+    width = _WIDTHS.get(wire_type)
+    if width is None or pos + width > end:
+        raise _Unsupported("group wire type or truncated value")
+    return pos, pos + width
+
+
 class _Checked:
     """A walked record's fixed bytes and varint value bytes, checked against many rows at once."""
 
@@ -102,34 +115,7 @@ class _Layout(_Checked):
         pos, end = 0, len(record)
         while pos < end:
             field, wire_type, pos = _key(record, pos, end, fixed)
-            if wire_type == 0:
-                start = pos
-                _, pos = _varint(record, pos, end)
-                if field in _VARINT_FIELDS:
-                    if field in self.varints:
-                        raise _Unsupported("repeated scalar")
-                    self.varints[field] = list(range(start, pos))
-                    cont.extend(range(start, pos))
-                elif field == _MASK:
-                    raise _Unsupported("unpacked action mask")
-                else:
-                    fixed.extend(range(start, pos))
-            elif wire_type == 5:
-                if pos + 4 > end:
-                    raise _Unsupported("truncated fixed32")
-                if field in _F32_FIELDS:
-                    if field in self.f32:
-                        raise _Unsupported("repeated scalar")
-                    self.f32[field] = pos
-                else:
-                    fixed.extend(range(pos, pos + 4))
-                pos += 4
-            elif wire_type == 1:
-                if pos + 8 > end:
-                    raise _Unsupported("truncated fixed64")
-                fixed.extend(range(pos, pos + 8))
-                pos += 8
-            elif wire_type == 2:
+            if wire_type == 2:
                 pos, content_end = _length(record, pos, end, fixed)
                 if field == _MASK:
                     if self.mask is not None or any(b >= 0x80 for b in record[pos:content_end]):
@@ -141,8 +127,21 @@ class _Layout(_Checked):
                 else:
                     fixed.extend(range(pos, content_end))
                 pos = content_end
+                continue
+            if field == _MASK:
+                raise _Unsupported("unpacked action mask")
+            start, pos = _scalar(record, pos, end, wire_type)
+            if wire_type == 0 and field in _VARINT_FIELDS:
+                if field in self.varints:
+                    raise _Unsupported("repeated scalar")
+                self.varints[field] = list(range(start, pos))
+                cont.extend(range(start, pos))
+            elif wire_type == 5 and field in _F32_FIELDS:
+                if field in self.f32:
+                    raise _Unsupported("repeated scalar")
+                self.f32[field] = start
             else:
-                raise _Unsupported("group wire type")
+                fixed.extend(range(start, pos))
         self._finish(record, fixed, cont)
 
 
@@ -179,21 +178,12 @@ class _ActionLayout(_Checked):
                 elif field != 1:  # deprecated vector actions: values nobody reads here
                     fixed.extend(range(pos, content_end))
                 pos = content_end
-            elif wire_type == 5:
-                if pos + 4 > end:
-                    raise _Unsupported("truncated fixed32")
-                if field != 4:
-                    fixed.extend(range(pos, pos + 4))
-                pos += 4
-            elif wire_type == 0 and field not in (1, 6, 7):
-                start = pos
-                _, pos = _varint(record, pos, end)
-                fixed.extend(range(start, pos))
-            elif wire_type == 1 and pos + 8 <= end:
-                fixed.extend(range(pos, pos + 8))
-                pos += 8
+            elif field in (1, 6, 7):
+                raise _Unsupported("unpacked actions")
             else:
-                raise _Unsupported("unpacked actions or group wire type")
+                start, pos = _scalar(record, pos, end, wire_type)
+                if (field, wire_type) != (4, 5):  # 4: the deprecated float value nobody reads
+                    fixed.extend(range(start, pos))
         self._finish(record, fixed, cont)
 
 
@@ -203,15 +193,9 @@ def _observation_layout(record: bytes, pos: int, end: int, fixed: list[int]):
     payload: tuple[int, int] | None = None
     while pos < end:
         field, wire_type, pos = _key(record, pos, end, fixed)
-        if field in (_COMPRESSED_DATA,) or (field == _SHAPE and wire_type != 2):
+        if field == _COMPRESSED_DATA or (field == _SHAPE and wire_type != 2):
             raise _Unsupported("compressed or unpacked observation")
-        if wire_type == 0:
-            start = pos
-            value, pos = _varint(record, pos, end)
-            if field == _COMPRESSION and value != 0:
-                raise _Unsupported("compressed observation")
-            fixed.extend(range(start, pos))
-        elif wire_type == 2:
+        if wire_type == 2:
             pos, content_end = _length(record, pos, end, fixed)
             if field == _SHAPE:
                 dims, p = [], pos
@@ -227,12 +211,11 @@ def _observation_layout(record: bytes, pos: int, end: int, fixed: list[int]):
             else:
                 fixed.extend(range(pos, content_end))
             pos = content_end
-        elif wire_type in (1, 5):
-            width = 8 if wire_type == 1 else 4
-            fixed.extend(range(pos, pos + width))
-            pos += width
         else:
-            raise _Unsupported("group wire type")
+            start, pos = _scalar(record, pos, end, wire_type)
+            if field == _COMPRESSION and record[start:pos] != b"\x00":
+                raise _Unsupported("compressed observation")
+            fixed.extend(range(start, pos))
     first, count = payload if payload is not None else (0, 0)
     return shape, first, count
 
