@@ -2,13 +2,13 @@
 
 User errors (trainer.errors.UserError) become one line on stderr and exit code 2; a traceback
 only with --debug. SIGINT, SIGTERM, SIGQUIT and SIGUSR1 (what Slurm sends before a time limit)
-all stop training the same way Ctrl-C does: a final checkpoint and ONNX are written first.
+all stop training the same way Ctrl-C does: a final checkpoint and ONNX are written first
+(``trainer.stop``: the stop happens at a safe point, not where the signal lands).
 """
 from __future__ import annotations
 
 import logging
 import platform
-import signal
 import sys
 
 LOGO = r"""
@@ -18,22 +18,6 @@ LOGO = r"""
 """
 
 logger = logging.getLogger("mlagents_like")
-
-
-class _GracefulStop(KeyboardInterrupt):
-    """Raised in the main thread by a termination signal; handled like Ctrl-C."""
-
-
-def _install_signal_handlers() -> None:
-    def handler(signum, _frame):
-        raise _GracefulStop(signal.Signals(signum).name)
-
-    # SIGINT too: a trainer started from a script in the background inherits SIGINT as ignored,
-    # and would then not stop on kill -INT
-    for name in ("SIGINT", "SIGTERM", "SIGQUIT", "SIGUSR1"):
-        sig = getattr(signal, name, None)
-        if sig is not None:
-            signal.signal(sig, handler)
 
 
 def setup_logging(debug: bool) -> None:
@@ -82,7 +66,9 @@ def main(argv: list[str] | None = None) -> int:
         print(LOGO)
         for line in version_lines():
             logger.info(line)
-        _install_signal_handlers()
+        from trainer.stop import STOP
+
+        STOP.install()
         from trainer.run import run_training
 
         return run_training(options)

@@ -34,6 +34,7 @@ from trainer.errors import UnityCommunicatorStoppedError, UserError
 from trainer.protocol import side_channels as sc
 from trainer.protocol.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer.rollout import AgentTracker, concat_masks
+from trainer.stop import STOP
 
 if TYPE_CHECKING:  # torch is imported only once the simulators are launched (see run_training)
     from trainer.behavior import BehaviorRunner
@@ -328,10 +329,12 @@ def run_training(options) -> int:
         # while the simulators boot: import torch and the networks (seconds, on a small machine)
         configure_torch_threads()
         import trainer.behavior  # noqa: F401
+        STOP.check()
         pool.connect()
         with timers.scope("env.reset"):
             results = pool.reset(state.initial_side_channel())
         while True:
+            STOP.check()  # stop signals take effect here, between steps (trainer.stop)
             state.side_channel_in(results)
             trajectories: list = []
             actions, decided = state.decide(results)

@@ -182,3 +182,56 @@ def test_sigint_saves_a_checkpoint_and_onnx(tmp_path, basic_config, env_no_proxy
     assert (run / "Basic.onnx").is_file() and (run / "Basic" / "checkpoint.pt").is_file()
     status = json.loads((run / "run_logs/training_status.json").read_text())
     assert status["Basic"]["final_checkpoint"]["steps"] >= 1000
+
+
+def test_a_second_signal_during_the_final_save_loses_nothing(tmp_path, basic_config, env_no_proxy):
+    """Slurm and impatient users send more than one signal: the second lands while the final
+    checkpoint and ONNX are written, and must not cut them short (a third would)."""
+    cfg = basic_config(max_steps=10_000_000, interval=10_000_000, summary=1000)
+    cmd = [sys.executable, "-m", "trainer.cli", str(cfg), "--env", "stub:basic", "--run-id", "twice",
+           "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env_no_proxy)
+    try:
+        lines = []
+        for line in proc.stdout:
+            lines.append(line)
+            if "Basic. Step: 1000." in line:
+                proc.send_signal(signal.SIGTERM)
+            if "Learning was interrupted" in line:  # finish_run starts now: checkpoint, then ONNX
+                proc.send_signal(signal.SIGTERM)
+                break
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    text = "".join(lines) + out
+    assert proc.returncode == 0, text
+    assert "already stopping" in text
+    run = tmp_path / "results" / "twice"
+    assert (run / "Basic.onnx").is_file() and (run / "Basic" / "checkpoint.pt").is_file()
+    status = json.loads((run / "run_logs/training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] >= 1000
+
+
+def test_sigterm_while_waiting_for_the_editor_stops_at_once(tmp_path, basic_config, env_no_proxy):
+    """No --env: the trainer waits (here up to 600 s) for the Editor's Play button; a stop signal
+    ends that wait within a fraction of a second, not at the next poll of the timeout."""
+    cmd = [sys.executable, "-m", "trainer.cli", str(basic_config()), "--run-id", "editor",
+           "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block()),
+           "--timeout-wait", "600"]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env_no_proxy)
+    try:
+        lines = []
+        for line in proc.stdout:
+            lines.append(line)
+            if "Listening on port" in line:
+                break
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=40)  # the wait would otherwise last 600 s (60 s per poll)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, "".join(lines) + out
+    assert "Traceback" not in out

@@ -43,6 +43,7 @@ from trainer.errors import (
 from trainer.protocol import codec
 from trainer.protocol.http2 import GRPC_INTERNAL, Http2Transport
 from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
+from trainer.stop import STOP
 
 logger = logging.getLogger(__name__)
 
@@ -57,6 +58,8 @@ def _status_message(status: int) -> unity_message_pb2.UnityMessageProto:
     return message
 
 
+# longest wait between looks at a stop signal while a simulator is silent (loading, paused)
+_STOP_POLL_S = 0.25
 _DELIVERY_WAIT_S = 0.05  # upper bound; normally the RPC completes in well under a millisecond
 SERVICE = "communicator_objects.UnityToExternalProto"
 EXCHANGE_PATH = f"/{SERVICE}/Exchange".encode()
@@ -383,12 +386,13 @@ class UnityEndpoint:
         if self._pending is not None:
             raise RuntimeError("the previous simulator call has not been answered yet")
         started = time.monotonic()
-        poll_interval = max(self.timeout_wait / 10.0, 0.001)
+        poll_interval = min(max(self.timeout_wait / 10.0, 0.001), _STOP_POLL_S)
         wait = 0.0  # first look without waiting, so a dead simulator is reported at once
         while True:
             call = self._transport.take(wait)
             if call is not None:
                 break
+            STOP.check()  # a stop signal while waiting: no call is half-taken here
             if self._transport.closed:
                 raise UnityCommunicatorStoppedError(f"The endpoint on port {self.port} was closed.")
             self._raise_if_simulator_died()
