@@ -253,3 +253,60 @@ def test_stub_applies_many_actions_from_bytes_like_one_by_one(monkeypatch):
         fast.apply_action_list(action_list([((), c + [0.0], ()) for c in cont.tolist()]))
     fast.apply_action_list(None)
     assert not fast.continuous.any()
+
+
+def _walk(data: bytes):
+    """Reference cut of ``repeated bytes = 1`` records, one record at a time."""
+    starts, lengths, pos = [], [], 0
+    while pos < len(data):
+        assert data[pos] == 0x0A
+        size, shift, pos = 0, 0, pos + 1
+        while True:
+            byte = data[pos]
+            pos += 1
+            size |= (byte & 0x7F) << shift
+            shift += 7
+            if byte < 0x80:
+                break
+        starts.append(pos)
+        lengths.append(size)
+        pos += size
+    return starts, lengths
+
+
+@pytest.mark.timeout(60)
+def test_split_records_skips_runs_of_one_length_exactly_like_a_record_walk():
+    rng = np.random.default_rng(7)
+    for trial in range(300):
+        # runs of equal lengths, lengths that repeat later, payloads full of 0x0A and length bytes
+        sizes = []
+        while len(sizes) < rng.integers(1, 60):
+            sizes += [int(rng.choice([0, 1, 8, 10, 45, 72, 74, 127, 128, 300]))] * int(rng.integers(1, 12))
+        data = b"".join(b"\x0a" + bytes(_varint_bytes(s)) + bytes(rng.choice([0x0A, s % 256, 0x48], size=s).astype(np.uint8))
+                        for s in sizes)
+        got = records.split_records(data)
+        starts, lengths = _walk(data)
+        assert got is not None
+        assert got[0].tolist() == starts and got[1].tolist() == lengths, sizes
+        for cut in (1, 2, len(data) // 2):  # truncated messages are refused, never looped on
+            if cut < len(data):
+                assert records.split_records(data[:-cut]) is None or _walk_ok(data[:-cut])
+
+
+def _varint_bytes(value: int) -> list[int]:
+    out = []
+    while True:
+        byte = value & 0x7F
+        value >>= 7
+        out.append(byte | (0x80 if value else 0))
+        if not value:
+            return out
+
+
+def _walk_ok(data: bytes) -> bool:
+    """True if ``data`` still happens to cut into whole records (a cut at a record boundary)."""
+    try:
+        starts, lengths = _walk(data)
+    except (AssertionError, IndexError):
+        return False
+    return starts[-1] + lengths[-1] == len(data) if starts else True

@@ -5,9 +5,10 @@ access (measured ~5 µs per ball3d agent, the largest per-agent cost of an excha
 of one behavior almost always serialize to the same *layout*: the same fields with the same
 lengths, only the values differ. So:
 
-1. the serialized ``ListAgentInfoProto`` is cut into its records (one short loop over the record
-   headers);
-2. records of equal length are gathered into one uint8 matrix [rows, length];
+1. the serialized ``ListAgentInfoProto`` is cut into its records: runs of consecutive records of
+   one length are recognised at once from their headers at a fixed stride;
+2. records of equal length form one uint8 matrix [rows, length]: a view of each run, joined by
+   one copy when there are several (a gather by index for records of 128 bytes or more);
 3. the first record is walked byte by byte, once, to learn its layout: which bytes are tags,
    length prefixes and other fixed content, which are values (the reward's 4 bytes, the id's
    varint bytes, each observation's packed floats, the action mask's bools);
@@ -236,6 +237,14 @@ def _float_data_layout(record: bytes, pos: int, end: int, fixed: list[int]) -> t
 
 def split_records(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     """Start offsets and lengths of the records of a serialized ``repeated ... = 1`` message."""
+    cut = _cut(data)
+    return None if cut is None else cut[:2]
+
+
+def _cut(data: bytes) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int, int, int]] | None] | None:
+    """(starts, lengths, runs): ``runs`` lists (first record, header position, record count,
+    length) of consecutive records of one length when every record is shorter than 128 bytes
+    (2-byte headers), else None. None for anything but whole field-1 records."""
     end = len(data)
     if end > 2 and data[0] == 0x0A and data[1] < 0x80 and end % (data[1] + 2) == 0:
         # records of one length (the common case): check every header at once
@@ -243,21 +252,29 @@ def split_records(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
         headers = np.frombuffer(data, dtype=np.uint8).reshape(-1, stride)[:, :2]
         if (headers[:, 0] == 0x0A).all() and (headers[:, 1] == data[1]).all():
             count = end // stride
-            return np.arange(2, end, stride, dtype=np.intp), np.full(count, data[1], dtype=np.intp)
-    # records shorter than 128 bytes have 2-byte headers: only their starts need collecting
-    starts: list[int] = []
-    append = starts.append
-    pos = 0
-    while pos < end:
-        size = data[pos + 1] if pos + 1 < end else 0x80
-        if data[pos] != 0x0A or size >= 0x80:
+            return (2 + stride * np.arange(count, dtype=np.intp), np.full(count, data[1], dtype=np.intp),
+                    [(0, 0, count, data[1])])
+    # records shorter than 128 bytes have 2-byte headers. Runs of records of one length are
+    # skipped at once: from a known record start, the headers of the next ``count`` records of
+    # the same length would sit at a fixed stride, and the run goes on for as long as they read
+    # (0x0A, length) (bytes.lstrip counts that in C). Each run ends where the length changes.
+    runs: list[tuple[int, int, int, int]] = []
+    pos = row = 0
+    while pos + 1 < end and data[pos] == 0x0A and data[pos + 1] < 0x80:
+        size = data[pos + 1]
+        stride = size + 2
+        stop = pos + (end - pos) // stride * stride
+        count = (stop - pos) // stride
+        if count == 0:  # a truncated last record: the general walk below rejects it
             break
-        pos += 2
-        append(pos)
-        pos += size
+        run = min(count - len(data[pos:stop:stride].lstrip(b"\n")),
+                  count - len(data[pos + 1:stop:stride].lstrip(bytes((size,)))))
+        runs.append((row, pos, run, size))
+        row += run
+        pos += run * stride
     if pos == end:
-        bounds = np.array(starts + [end + 2], dtype=np.intp)
-        return bounds[:-1], np.diff(bounds) - 2
+        lengths = np.repeat(np.array([r[3] for r in runs], dtype=np.intp), [r[2] for r in runs])
+        return np.cumsum(lengths + 2) - lengths, lengths, runs
     # a long record somewhere: the general walk
     starts, lengths = [], []
     pos = 0
@@ -273,7 +290,7 @@ def split_records(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
         return None
     if pos != end:
         return None
-    return np.array(starts, dtype=np.intp), np.array(lengths, dtype=np.intp)
+    return np.array(starts, dtype=np.intp), np.array(lengths, dtype=np.intp), None
 
 
 @dataclass
@@ -297,20 +314,26 @@ _MAX_LAYOUTS = 8  # per record length; more distinct layouts than this: parse ag
 def _groups(key, data: bytes, make_layout) -> tuple[int, list]:
     """Cut ``data`` into records and sort them by layout: (record count, [(rows, uint8 matrix
     [rows, length], layout)]) covering every record once. Raises _Unsupported."""
-    split = split_records(data)
-    if split is None:
+    cut = _cut(data)
+    if cut is None:
         raise _Unsupported("not a repeated message field 1")
-    starts, lengths = split
+    starts, lengths, runs = cut
     n = len(starts)
     buf = np.frombuffer(data, dtype=np.uint8)
     groups = []
-    # all records one length with 2-byte headers: they sit at a fixed stride in ``data``
-    uniform = n > 0 and bool((lengths == lengths[0]).all()) and len(buf) == n * (int(lengths[0]) + 2)
-    distinct = [int(lengths[0])] if uniform else sorted(set(lengths.tolist()))
+    distinct = sorted({run[3] for run in runs}) if runs is not None else sorted(set(lengths.tolist()))
     for length in distinct:
-        if uniform:
-            rows = np.arange(n)
-            matrix = buf.reshape(n, length + 2)[:, 2:]  # a view: every record at a fixed stride
+        if runs is not None:
+            # each run of records of this length is a [count, length] view at a fixed stride
+            # (no copy when there is one run); several are joined by one copy
+            mine = [run for run in runs if run[3] == length]
+            views = [buf[pos:pos + count * (length + 2)].reshape(count, length + 2)[:, 2:]
+                     for _, pos, count, _ in mine]
+            if len(mine) == 1:
+                rows, matrix = np.arange(mine[0][0], mine[0][0] + mine[0][2]), views[0]
+            else:
+                rows = np.concatenate([np.arange(first, first + count) for first, _, count, _ in mine])
+                matrix = np.concatenate(views)
         else:
             rows = np.arange(n) if len(distinct) == 1 else np.nonzero(lengths == length)[0]
             matrix = buf[starts[rows][:, None] + np.arange(length)]
