@@ -310,3 +310,76 @@ def _walk_ok(data: bytes) -> bool:
     except (AssertionError, IndexError):
         return False
     return starts[-1] + lengths[-1] == len(data) if starts else True
+
+
+# ------------------------------------------------------------------ whole messages
+def _message(outputs: dict, params=(), side_channel: bytes = b"side") -> bytes:
+    from protos.communicator_objects import unity_message_pb2
+    message = unity_message_pb2.UnityMessageProto()
+    message.header.status = 200
+    message.unity_output.CopyFrom(output_with(outputs, params))
+    message.unity_output.rl_output.side_channel = side_channel
+    return message.SerializeToString()
+
+
+def _decode(payload: bytes, specs: dict, min_rows: int):
+    """(result, lists taken as bytes) the way UnityEndpoint decodes a request."""
+    from protos.communicator_objects import unity_message_pb2
+    split = records.split_agent_lists(payload, min_rows)
+    body, raw = split if split is not None else (payload, None)
+    request = unity_message_pb2.UnityMessageProto.FromString(body)
+    return codec.decode_rl_output(request.unity_output, specs, raw), raw
+
+
+def test_large_lists_are_taken_out_before_parsing_and_decoded_once(monkeypatch):
+    big = varied_infos(70, 3)
+    small = [agent_info(k, obs=[[1.0, 2.0]], reward=0.5) for k in range(1, 4)]
+    params = [brain_params("B", 2, (3, 2)), brain_params("S", 1)]
+    payload = _message({"B": big, "S": small}, params)
+    split = records.split_agent_lists(payload, 64)
+    assert split is not None and set(split[1]) == {"B"}  # only the list of >= 64 agents
+    body, raw = split
+    assert len(body) < len(payload) - len(raw["B"][0])
+    monkeypatch.setattr(records, "MIN_ROWS", 64)
+    fast, _ = _decode(payload, {}, 64)  # first message: specs built from the raw list's first agent
+    monkeypatch.setattr(records, "split_agent_lists", lambda *a: pytest.fail("unused here"))
+    from protos.communicator_objects import unity_message_pb2
+    slow = codec.decode_rl_output(unity_message_pb2.UnityMessageProto.FromString(payload).unity_output, {})
+    assert fast.specs == slow.specs and set(fast.specs) == {"B", "S"}
+    assert fast.specs["B"].action_spec == ActionSpec(2, (3, 2))
+    assert fast.side_channel == slow.side_channel == b"side"
+    assert list(fast.steps) == list(slow.steps)
+    for name in ("B", "S"):
+        assert_same_steps(fast.steps[name], slow.steps[name])
+    parsed = codec.steps_from_agent_infos("B", big, fast.specs["B"])  # and against the protos themselves
+    assert_same_steps(fast.steps["B"], parsed)
+
+
+def test_unusual_messages_are_parsed_whole():
+    big = [agent_info(k, obs=[[1.0, 2.0, 3.0], [4.0, 5.0]]) for k in range(1, 80)]
+    payload = _message({"B": big}, [brain_params("B", 2, (3, 2))])
+    assert records.split_agent_lists(payload, 64) is not None
+    assert records.split_agent_lists(payload, 100) is None  # no list that large
+    assert records.split_agent_lists(payload + payload[:2], 64) is None  # a truncated extra field
+    key = payload.index(b"\x0a\x01B\x12")  # the map entry's key "B", then its value
+    assert records.split_agent_lists(payload[:key + 2] + b"\xff" + payload[key + 3:], 64) is None  # not UTF-8
+    twice = payload + payload[payload.index(b"\x12", 2):]  # unity_output sent twice (protobuf merges)
+    assert records.split_agent_lists(twice, 64) is None
+    m1 = _message({}, [])  # no agents at all (e.g. the handshake's second message)
+    assert records.split_agent_lists(m1, 1) is None
+
+
+def test_a_garbled_large_list_is_a_protocol_error_not_a_crash(monkeypatch):
+    good = [agent_info(k, obs=[[1.0, 2.0, 3.0], [4.0, 5.0]], reward=0.1) for k in range(1, 80)]
+    payload = bytearray(_message({"B": good}, [brain_params("B", 2, (3, 2))]))
+    body, raw = records.split_agent_lists(bytes(payload), 64)
+    data, cut = raw["B"]
+    starts, lengths, _ = cut
+    garbled = bytearray(data)
+    garbled[starts[5]:starts[5] + lengths[5]] = b"\xff" * int(lengths[5])  # a record that is no AgentInfoProto
+    spec = BehaviorSpec((vec(3), vec(2)), ActionSpec(2, (3, 2)))
+    with pytest.raises(ProtocolError, match="not valid AgentInfoProtos"):
+        codec.decode_rl_output(
+            __import__("protos.communicator_objects.unity_message_pb2", fromlist=["x"])
+            .UnityMessageProto.FromString(body).unity_output,
+            {"B": spec}, {"B": (bytes(garbled), records._cut(bytes(garbled)))})

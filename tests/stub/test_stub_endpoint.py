@@ -36,3 +36,43 @@ def test_endpoint_trains_basic_through_the_stub(endpoint, launch):
     assert np.argmax(decision.obs[0], axis=1).tolist() == [10, 10]  # agent 1 stayed; agent 0 restarted
     endpoint.close()
     assert process.wait(timeout=10) == 0
+
+
+def test_many_agents_are_decoded_from_bytes_once_and_equal_a_full_parse(endpoint, launch, monkeypatch):
+    """72 ball3d agents: the endpoint takes the agent info list out of each message before
+    parsing it (records.split_agent_lists) and decodes it from its bytes; every step equals
+    what a plain parse of the same message gives, terminal infos included."""
+    from protos.communicator_objects import unity_message_pb2
+    from trainer.protocol import codec, records
+
+    payloads, taken = [], []
+    real_split = records.split_agent_lists
+
+    def spy(payload, min_rows):
+        payloads.append(payload)
+        split = real_split(payload, min_rows)
+        taken.append(split is not None)
+        return split
+
+    monkeypatch.setattr(records, "split_agent_lists", spy)
+    process = launch(endpoint.port, "ball3d", "--num-areas", "6")
+    endpoint.handshake(seed=2, num_areas=6)
+    result = endpoint.reset()
+    key = "3DBall?team=0"
+    terminals = 0
+    for step in range(40):
+        decision, terminal = result.steps[key]
+        terminals += len(terminal)
+        plain = codec.decode_rl_output(unity_message_pb2.UnityMessageProto.FromString(payloads[-1]).unity_output,
+                                       {key: endpoint.behavior_specs[key]} if step else {})
+        for got, want in zip(result.steps[key], plain.steps[key]):
+            np.testing.assert_array_equal(got.agent_id, want.agent_id)
+            np.testing.assert_array_equal(got.reward, want.reward)
+            np.testing.assert_array_equal(got.obs[0], want.obs[0])
+        actions = np.full((len(decision), 2), 1.0 if step % 2 else -1.0, np.float32)  # balls roll off
+        result = endpoint.step({key: ActionTuple(actions, np.zeros((len(decision), 0), np.int32))})
+    # the handshake's two messages carry no agents; every later one took the byte path
+    assert taken[:2] == [False, False] and all(taken[2:]) and len(taken) == 43
+    assert terminals > 0  # including messages that mix terminal infos with decision requests
+    endpoint.close()
+    assert process.wait(timeout=10) == 0

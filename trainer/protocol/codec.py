@@ -14,8 +14,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from protos.communicator_objects import capabilities_pb2, command_pb2, observation_pb2
-from protos.communicator_objects import unity_rl_input_pb2
+from google.protobuf.message import DecodeError
+
+from protos.communicator_objects import agent_info_pb2, capabilities_pb2, command_pb2, observation_pb2
+from protos.communicator_objects import unity_rl_input_pb2, unity_rl_output_pb2
 from trainer.errors import ProtocolError, UnityVersionError
 from trainer.protocol import records, wire
 from trainer.protocol.png import decode_png_observation
@@ -121,33 +123,76 @@ def _action_spec_from_proto(brain_params) -> ActionSpec:
 
 
 # --------------------------------------------------------------------------- Unity → trainer
-def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec]) -> StepResult:
+def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec],
+                     raw_lists: Mapping[str, tuple] | None = None) -> StepResult:
     """Decode one UnityOutputProto into DecisionSteps/TerminalSteps per behavior.
 
     ``known_specs`` is not modified: specs registered by this message's ``brain_parameters`` are
     returned in ``StepResult.specs`` (the caller merges them). Every behavior with a spec gets an
     entry in ``StepResult.steps`` (empty steps when the message does not mention it).
+    ``raw_lists``: agent info lists taken out of the message before it was parsed
+    (``records.split_agent_lists``: {behavior: (serialized ListAgentInfoProto, its cut)}).
     """
     agent_infos = output.rl_output.agentInfos
+    raw_lists = raw_lists or {}
     new_specs: dict[str, BehaviorSpec] = {}
     for brain_params in output.rl_initialization_output.brain_parameters:
         name = brain_params.brain_name
-        if name in agent_infos and len(agent_infos[name].value) > 0:
+        if name in raw_lists:
+            data, (starts, lengths, _) = raw_lists[name]
+            first = _parse(name, agent_info_pb2.AgentInfoProto, data[starts[0]:starts[0] + lengths[0]])
+            new_specs[name] = behavior_spec_from_proto(brain_params, first)
+        elif name in agent_infos and len(agent_infos[name].value) > 0:
             new_specs[name] = behavior_spec_from_proto(brain_params, agent_infos[name].value[0])
     specs = {**known_specs, **new_specs}
-    for name in agent_infos:
-        if name not in specs and len(agent_infos[name].value) > 0:
+    for name in [*agent_infos, *raw_lists]:
+        if name not in specs and (name in raw_lists or len(agent_infos[name].value) > 0):
             raise ProtocolError(
                 f"The simulator sent agents of behavior {name!r} without ever sending its "
                 "brain_parameters; it does not follow the ML-Agents protocol."
             )
     steps = {}
     for name, spec in specs.items():
-        if name in agent_infos:
+        if name in raw_lists:
+            steps[name] = _steps_from_list_bytes(name, *raw_lists[name], spec)
+        elif name in agent_infos:
             steps[name] = steps_from_agent_infos(name, agent_infos[name].value, spec, agent_infos[name])
         else:
             steps[name] = (DecisionSteps.empty(spec), TerminalSteps.empty(spec))
     return StepResult(specs=new_specs, steps=steps, side_channel=output.rl_output.side_channel)
+
+
+def _steps_from_list_bytes(behavior_name: str, data: bytes, cut: tuple, spec: BehaviorSpec):
+    """``steps_from_agent_infos`` for a serialized ListAgentInfoProto that was never parsed:
+    read from its bytes, or, if that path does not apply, parsed now and read agent by agent."""
+    fields = _from_bytes(behavior_name, data, spec, cut)
+    if fields is None:
+        infos = _parse(behavior_name, unity_rl_output_pb2.UnityRLOutputProto.ListAgentInfoProto, data).value
+        fields = _agent_by_agent(behavior_name, infos, spec)
+    return _split_steps(fields, spec)
+
+
+def _parse(behavior_name: str, message_type, data: bytes):
+    try:
+        return message_type.FromString(data)
+    except DecodeError as error:
+        raise ProtocolError(
+            f"The simulator sent agent infos of behavior {behavior_name!r} that are not valid "
+            f"AgentInfoProtos ({error}); is it an ML-Agents environment speaking communication "
+            "API 1.x? Rebuild it with the ML-Agents package of Release 22."
+        ) from None
+
+
+def _from_bytes(behavior_name: str, data: bytes, spec: BehaviorSpec, cut=None) -> records.Decoded | None:
+    """Every agent's fields read from the serialized list (``records.decode``) and checked for
+    NaN/Inf; None if the byte path does not apply."""
+    fields = records.decode(behavior_name, data, [tuple(o.shape) for o in spec.observation_specs],
+                            int(sum(spec.action_spec.discrete_branches)), cut)
+    if fields is not None:
+        _require_finite_rewards(behavior_name, fields.reward, fields.group_reward, fields.agent_id)
+        for index, (stacked, obs_spec) in enumerate(zip(fields.obs, spec.observation_specs)):
+            _require_finite(stacked, behavior_name, f"observation {index} ({obs_spec.name})", fields.agent_id)
+    return fields
 
 
 # C-level field access for the per-agent loops (no Python frame per agent)
@@ -171,13 +216,7 @@ def steps_from_agent_infos(
     n = len(agent_infos)
     fields = _few_deciding_agents(agent_infos, spec) if n < _FEW_AGENTS else None
     if fields is None and agent_info_list is not None and n >= records.MIN_ROWS:
-        fields = records.decode(behavior_name, agent_info_list.SerializeToString(),
-                                [tuple(o.shape) for o in spec.observation_specs],
-                                int(sum(spec.action_spec.discrete_branches)))
-        if fields is not None:
-            _require_finite_rewards(behavior_name, fields.reward, fields.group_reward, fields.agent_id)
-            for index, (stacked, obs_spec) in enumerate(zip(fields.obs, spec.observation_specs)):
-                _require_finite(stacked, behavior_name, f"observation {index} ({obs_spec.name})", fields.agent_id)
+        fields = _from_bytes(behavior_name, agent_info_list.SerializeToString(), spec)
     if fields is None:
         fields = _agent_by_agent(behavior_name, agent_infos, spec)
     return _split_steps(fields, spec)

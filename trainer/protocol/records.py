@@ -311,10 +311,12 @@ _LAYOUTS: dict[tuple, list[_Checked]] = {}
 _MAX_LAYOUTS = 8  # per record length; more distinct layouts than this: parse agent by agent
 
 
-def _groups(key, data: bytes, make_layout) -> tuple[int, list]:
+def _groups(key, data: bytes, make_layout, cut=None) -> tuple[int, list]:
     """Cut ``data`` into records and sort them by layout: (record count, [(rows, uint8 matrix
-    [rows, length], layout)]) covering every record once. Raises _Unsupported."""
-    cut = _cut(data)
+    [rows, length], layout)]) covering every record once. Raises _Unsupported. ``cut``: the
+    result of ``_cut(data)`` if the caller has it already."""
+    if cut is None:
+        cut = _cut(data)
     if cut is None:
         raise _Unsupported("not a repeated message field 1")
     starts, lengths, runs = cut
@@ -364,14 +366,14 @@ def _groups(key, data: bytes, make_layout) -> tuple[int, list]:
     return n, groups
 
 
-def decode(key: str, data: bytes, shapes: list[tuple[int, ...]], mask_width: int) -> Decoded | None:
+def decode(key: str, data: bytes, shapes: list[tuple[int, ...]], mask_width: int, cut=None) -> Decoded | None:
     """All AgentInfoProtos of serialized ListAgentInfoProto ``data``, or None (see module doc).
 
     ``shapes``: the behavior's observation shapes (all must be uncompressed floats);
     ``mask_width``: the sum of its discrete branch sizes.
     """
     try:
-        n, groups = _groups(key, data, _Layout)
+        n, groups = _groups(key, data, _Layout, cut)
     except _Unsupported:
         return None
     sizes = [math.prod(shape) for shape in shapes]
@@ -453,3 +455,93 @@ def _fill(out: Decoded, rows, matrix: np.ndarray, layout: _Layout, mask_width: i
     if layout.mask is not None and layout.mask[1] == mask_width and mask_width:
         column, count = layout.mask
         out.mask[rows] = matrix[:, column:column + count] != 0
+
+
+# --------------------------------------------------------------------------- whole messages
+def _fields(data: bytes, start: int, end: int) -> list[tuple[int, int, int, int, int]]:
+    """The fields of the message at data[start:end]: (number, wire type, key start, value
+    start, value end) each. Raises _Unsupported on anything malformed."""
+    out = []
+    pos = start
+    while pos < end:
+        key_start = pos
+        key, pos = _varint(data, pos, end)
+        number, wire_type = key >> 3, key & 7
+        if wire_type == 2:
+            size, pos = _varint(data, pos, end)
+            value_start, value_end = pos, pos + size
+        else:
+            value_start, value_end = _scalar(data, pos, end, wire_type)
+        if value_end > end or number == 0:
+            raise _Unsupported("malformed message")
+        out.append((number, wire_type, key_start, value_start, value_end))
+        pos = value_end
+    return out
+
+
+def _replace(data: bytes, fields: list, index: int, number: int, body: bytes) -> bytes:
+    """The message of ``fields`` with field ``index`` replaced by a length-delimited ``body``."""
+    parts = [data[f[2]:f[4]] for f in fields]
+    key, size = _varint_bytes((number << 3) | 2), _varint_bytes(len(body))
+    parts[index] = key + size + body
+    return b"".join(parts)
+
+
+def _varint_bytes(value: int) -> bytes:
+    out = bytearray()
+    while value >= 0x80:
+        out.append((value & 0x7F) | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
+def _only(fields: list, number: int) -> int:
+    """Index of the single length-delimited field ``number``; raises if absent or repeated."""
+    found = [i for i, f in enumerate(fields) if f[0] == number]
+    if len(found) != 1 or fields[found[0]][1] != 2:
+        raise _Unsupported("field absent, repeated or not a message")
+    return found[0]
+
+
+def split_agent_lists(payload: bytes, min_rows: int) -> tuple[bytes, dict[str, tuple[bytes, tuple]]] | None:
+    """Take the large agent info lists out of a serialized UnityMessageProto before it is parsed.
+
+    Returns (the message without those ``agentInfos`` map entries, {behavior: (serialized
+    ListAgentInfoProto, its ``_cut``)}) for every list of at least ``min_rows`` records, so that
+    they are decoded once, from their bytes (``decode``), instead of being parsed into protobuf
+    objects and serialized again. None when there is no such list or anything is unusual (a
+    field repeated, a map key twice, a malformed length): the caller then parses the message
+    as it is.
+    """
+    try:
+        top = _fields(payload, 0, len(payload))
+        output_index = _only(top, 2)  # UnityMessageProto.unity_output
+        output = top[output_index]
+        middle = _fields(payload, output[3], output[4])
+        rl_index = _only(middle, 1)  # UnityOutputProto.rl_output
+        rl = middle[rl_index]
+        taken: dict[str, tuple[bytes, tuple]] = {}
+        seen: set[str] = set()
+        kept: list[bytes] = []
+        for field in _fields(payload, rl[3], rl[4]):
+            if field[0] == 2 and field[1] == 2:  # UnityRLOutputProto.agentInfos map entry
+                entry = _fields(payload, field[3], field[4])
+                if [(f[0], f[1]) for f in entry] != [(1, 2), (2, 2)]:
+                    return None  # an entry with a default or repeated key/value: parse it all
+                name = payload[entry[0][3]:entry[0][4]].decode("utf-8")
+                if name in seen:
+                    return None
+                seen.add(name)
+                value = payload[entry[1][3]:entry[1][4]]
+                cut = _cut(value)
+                if cut is not None and len(cut[0]) >= min_rows:
+                    taken[name] = (value, cut)
+                    continue
+            kept.append(payload[field[2]:field[4]])
+        if not taken:
+            return None
+        middle_body = _replace(payload, middle, rl_index, 1, b"".join(kept))
+        return _replace(payload, top, output_index, 2, middle_body), taken
+    except (_Unsupported, UnicodeDecodeError):
+        return None

@@ -40,7 +40,7 @@ from trainer.errors import (
     UnityCommunicatorStoppedError,
     UnityTimeOutError,
 )
-from trainer.protocol import codec
+from trainer.protocol import codec, records
 from trainer.protocol.http2 import GRPC_INTERNAL, Http2Transport
 from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
 from trainer.stop import STOP
@@ -229,6 +229,7 @@ class UnityEndpoint:
             raise ValueError(f"unknown transport {self.transport_name!r}")
         self._transport = None
         self._pending = None  # the simulator call we owe an answer
+        self._large_lists = True  # whether to look for agent info lists to decode from bytes
         self._deciding: dict[str, int] = {}  # agents per behavior that wait for an action
         self._messages_received = 0
         self._closed = False
@@ -358,8 +359,10 @@ class UnityEndpoint:
 
     def receive(self) -> StepResult:
         """Wait for the simulator's next message and decode it (leaves that call pending)."""
-        request = self._wait_for_call().request
-        result = codec.decode_rl_output(request.unity_output, self.behavior_specs)
+        call = self._wait_for_call()
+        result = codec.decode_rl_output(call.request.unity_output, self.behavior_specs, call.raw_lists)
+        self._large_lists = any(len(decision) + len(terminal) >= records.MIN_ROWS
+                                for decision, terminal in result.steps.values())
         self.behavior_specs.update(result.specs)
         self._deciding = {name: len(steps[0]) for name, steps in result.steps.items()}
         return result
@@ -404,8 +407,12 @@ class UnityEndpoint:
             if remaining <= 0:
                 raise self._timeout_error(time.monotonic() - started)
             wait = min(poll_interval, remaining)
+        # large agent info lists are kept as bytes and decoded once, by the codec; looked for
+        # while the last message had one (agent counts rarely change: small scenes skip the walk)
+        split = records.split_agent_lists(call.payload, records.MIN_ROWS) if self._large_lists else None
+        payload, raw_lists = split if split is not None else (call.payload, None)
         try:
-            request = unity_message_pb2.UnityMessageProto.FromString(call.payload)
+            request = unity_message_pb2.UnityMessageProto.FromString(payload)
         except DecodeError as error:
             call.fail(GRPC_INTERNAL, "the message is not a valid UnityMessageProto")
             raise ProtocolError(
@@ -413,7 +420,7 @@ class UnityEndpoint:
                 f"UnityMessageProto ({error}); is it an ML-Agents environment speaking "
                 "communication API 1.x? Rebuild it with the ML-Agents package of Release 22."
             ) from None
-        call = _Call(call, request)
+        call = _Call(call, request, raw_lists)
         self._pending = call
         self._messages_received += 1
         if request.header.status != STATUS_OK:
@@ -447,11 +454,12 @@ class UnityEndpoint:
 class _Call:
     """A transport's call with its request parsed once, on the trainer's thread."""
 
-    __slots__ = ("raw", "request")
+    __slots__ = ("raw", "request", "raw_lists")
 
-    def __init__(self, raw, request: unity_message_pb2.UnityMessageProto) -> None:
+    def __init__(self, raw, request: unity_message_pb2.UnityMessageProto, raw_lists=None) -> None:
         self.raw = raw
         self.request = request
+        self.raw_lists = raw_lists  # agent info lists left as bytes (records.split_agent_lists)
 
     def answer(self, response: bytes) -> None:
         self.raw.answer(response)
