@@ -155,7 +155,7 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     transport plus thread/process hand-offs.
     """
     from protos.communicator_objects import unity_message_pb2
-    from trainer.protocol import codec
+    from trainer.protocol import codec, records
     from unity_stub_env.academy import Academy
 
     task = make_task(task_name, num_areas=num_areas, seed=0)
@@ -171,12 +171,17 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
         message.unity_output.rl_output.agentInfos[spec_key].MergeFromString(academy.collect_encoded().data)
         wire_up = message.SerializeToString()
         t1 = clock()
-        request = unity_message_pb2.UnityMessageProto.FromString(wire_up)
         if not known:  # brain parameters arrive once; build the spec from the first message
             from unity_stub_env.agents import build_brain_parameters
-            request.unity_output.rl_initialization_output.brain_parameters.append(
+            first = unity_message_pb2.UnityMessageProto.FromString(wire_up)
+            first.unity_output.rl_initialization_output.brain_parameters.append(
                 build_brain_parameters(spec_key, task.action_spec))
-        result = codec.decode_rl_output(request.unity_output, known)
+            wire_up = first.SerializeToString()
+        # as UnityEndpoint._wait_for_call + receive: large agent lists are decoded from the bytes
+        split = records.split_agent_lists(wire_up, records.MIN_ROWS)
+        body, raw_lists = split if split is not None else (wire_up, None)
+        request = unity_message_pb2.UnityMessageProto.FromString(body)
+        result = codec.decode_rl_output(request.unity_output, known, raw_lists)
         known.update(result.specs)
         deciding = len(result.steps[spec_key][0])
         actions = {spec_key: known[spec_key].action_spec.empty_action(deciding)}
