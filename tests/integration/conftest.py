@@ -73,3 +73,24 @@ def env_no_proxy():
     for k in ("http_proxy", "https_proxy", "HTTP_PROXY", "HTTPS_PROXY", "grpc_proxy"):
         env.pop(k, None)
     return env
+
+
+def run_with_signals(cmd, cwd, env, triggers, timeout: float = 60) -> tuple[int, str]:
+    """Run ``cmd``; when an output line contains ``triggers[0][0]`` (all of them, for a tuple of
+    strings), send signal ``triggers[0][1]``, and so on in order; after the last one wait up to
+    ``timeout`` s for the exit (at least one trigger). Returns (exit code, whole output)."""
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    pending, lines = list(triggers), []
+    try:
+        for line in proc.stdout:
+            lines.append(line)
+            wanted = pending[0][0]
+            if all(part in line for part in ((wanted,) if isinstance(wanted, str) else wanted)):
+                proc.send_signal(pending.pop(0)[1])
+                if not pending:
+                    break
+        out, _ = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return proc.returncode, "".join(lines) + out

@@ -8,14 +8,12 @@ import json
 import os
 import signal
 import socket
-import subprocess
 import sys
-import time
 
 import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from tests.integration.conftest import free_port_block, learn
+from tests.integration.conftest import free_port_block, learn, run_with_signals
 
 
 def scalars(folder):
@@ -159,59 +157,37 @@ def test_simulator_that_dies_is_reported(tmp_path, basic_config, env_no_proxy):
     assert "Crash" in r.stderr and "Traceback" not in r.stderr
 
 
-def test_sigint_saves_a_checkpoint_and_onnx(tmp_path, basic_config, env_no_proxy):
-    cfg = basic_config(max_steps=10_000_000, interval=10_000_000, summary=1000)
-    cmd = [sys.executable, "-m", "trainer.cli", str(cfg), "--env", "stub:basic", "--run-id", "stop",
-           "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())]
-    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=env_no_proxy)
-    try:
-        lines = []
-        for line in proc.stdout:  # wait until training has produced at least one summary
-            lines.append(line)
-            if "Basic. Step: 1000." in line:
-                break
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    text = "".join(lines) + out
-    assert "Learning was interrupted" in text
-    run = tmp_path / "results" / "stop"
+def _assert_final_save(run, min_steps: int) -> None:
     assert (run / "Basic.onnx").is_file() and (run / "Basic" / "checkpoint.pt").is_file()
     status = json.loads((run / "run_logs/training_status.json").read_text())
-    assert status["Basic"]["final_checkpoint"]["steps"] >= 1000
+    assert status["Basic"]["final_checkpoint"]["steps"] >= min_steps
+
+
+def _endless_basic(tmp_path, basic_config, run_id: str) -> list[str]:
+    cfg = basic_config(max_steps=10_000_000, interval=10_000_000, summary=1000)
+    return [sys.executable, "-m", "trainer.cli", str(cfg), "--env", "stub:basic", "--run-id", run_id,
+            "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())]
+
+
+def test_sigint_saves_a_checkpoint_and_onnx(tmp_path, basic_config, env_no_proxy):
+    # wait until training has produced at least one summary
+    code, text = run_with_signals(_endless_basic(tmp_path, basic_config, "stop"), tmp_path, env_no_proxy,
+                                  [("Basic. Step: 1000.", signal.SIGINT)])
+    assert code == 0, text
+    assert "Learning was interrupted" in text
+    _assert_final_save(tmp_path / "results" / "stop", 1000)
 
 
 def test_a_second_signal_during_the_final_save_loses_nothing(tmp_path, basic_config, env_no_proxy):
     """Slurm and impatient users send more than one signal: the second lands while the final
     checkpoint and ONNX are written, and must not cut them short (a third would)."""
-    cfg = basic_config(max_steps=10_000_000, interval=10_000_000, summary=1000)
-    cmd = [sys.executable, "-m", "trainer.cli", str(cfg), "--env", "stub:basic", "--run-id", "twice",
-           "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())]
-    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=env_no_proxy)
-    try:
-        lines = []
-        for line in proc.stdout:
-            lines.append(line)
-            if "Basic. Step: 1000." in line:
-                proc.send_signal(signal.SIGTERM)
-            if "Learning was interrupted" in line:  # finish_run starts now: checkpoint, then ONNX
-                proc.send_signal(signal.SIGTERM)
-                break
-        out, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    text = "".join(lines) + out
-    assert proc.returncode == 0, text
+    code, text = run_with_signals(
+        _endless_basic(tmp_path, basic_config, "twice"), tmp_path, env_no_proxy,
+        [("Basic. Step: 1000.", signal.SIGTERM),
+         ("Learning was interrupted", signal.SIGTERM)])  # finish_run starts now: checkpoint, then ONNX
+    assert code == 0, text
     assert "already stopping" in text
-    run = tmp_path / "results" / "twice"
-    assert (run / "Basic.onnx").is_file() and (run / "Basic" / "checkpoint.pt").is_file()
-    status = json.loads((run / "run_logs/training_status.json").read_text())
-    assert status["Basic"]["final_checkpoint"]["steps"] >= 1000
+    _assert_final_save(tmp_path / "results" / "twice", 1000)
 
 
 def test_sigterm_while_waiting_for_the_editor_stops_at_once(tmp_path, basic_config, env_no_proxy):
@@ -220,18 +196,7 @@ def test_sigterm_while_waiting_for_the_editor_stops_at_once(tmp_path, basic_conf
     cmd = [sys.executable, "-m", "trainer.cli", str(basic_config()), "--run-id", "editor",
            "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block()),
            "--timeout-wait", "600"]
-    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=env_no_proxy)
-    try:
-        lines = []
-        for line in proc.stdout:
-            lines.append(line)
-            if "Listening on port" in line:
-                break
-        proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=40)  # the wait would otherwise last 600 s (60 s per poll)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 0, "".join(lines) + out
-    assert "Traceback" not in out
+    # the wait would otherwise last 600 s (60 s per poll)
+    code, text = run_with_signals(cmd, tmp_path, env_no_proxy, [("Listening on port", signal.SIGTERM)], timeout=40)
+    assert code == 0, text
+    assert "Traceback" not in text

@@ -3,13 +3,12 @@ from __future__ import annotations
 
 import json
 import signal
-import subprocess
 import sys
 import textwrap
 
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from tests.integration.conftest import BASIC_YAML, free_port_block, learn
+from tests.integration.conftest import BASIC_YAML, free_port_block, learn, run_with_signals
 
 
 def tb_scalars(folder) -> dict[str, list[tuple[int, float]]]:
@@ -98,23 +97,12 @@ def test_inference_runs_the_saved_policy_without_training(tmp_path, basic_config
     before = json.loads(status_file.read_text())["Basic"]
     cmd = [sys.executable, "-m", "trainer.cli", str(basic_config(max_steps=600)), "--env", "stub:basic",
            "--run-id", "i", "--results-dir", res, "--base-port", str(port), "--inference"]
-    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=env_no_proxy)
-    try:
-        seen = []
-        for line in proc.stdout:
-            seen.append(line)
-            if "Loaded" in line and "checkpoint.pt" in line:
-                break
-        proc.send_signal(signal.SIGTERM)  # what Slurm or a user's kill sends
-        out, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 0, "".join(seen) + out
+    # SIGTERM: what Slurm or a user's kill sends
+    code, text = run_with_signals(cmd, tmp_path, env_no_proxy, [(("Loaded", "checkpoint.pt"), signal.SIGTERM)])
+    assert code == 0, text
     after = json.loads(status_file.read_text())["Basic"]
     assert after["checkpoints"] == before["checkpoints"]  # inference writes no new checkpoint
-    assert f"at step {before['final_checkpoint']['steps']}" in "".join(seen)
+    assert f"at step {before['final_checkpoint']['steps']}" in text
 
 
 def test_two_behaviors_in_one_run_each_train_and_stop_at_their_own_max_steps(tmp_path, env_no_proxy):

@@ -9,7 +9,7 @@ from protos.communicator_objects import agent_info_pb2, observation_pb2
 from tests.protocol.conftest import agent_info, brain_params
 from tests.protocol.test_codec import output_with
 from trainer.errors import ProtocolError
-from trainer.protocol import codec, records
+from trainer.protocol import codec, records, wire
 from trainer.protocol.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 
 
@@ -282,7 +282,7 @@ def test_split_records_skips_runs_of_one_length_exactly_like_a_record_walk():
         sizes = []
         while len(sizes) < rng.integers(1, 60):
             sizes += [int(rng.choice([0, 1, 8, 10, 45, 72, 74, 127, 128, 300]))] * int(rng.integers(1, 12))
-        data = b"".join(b"\x0a" + bytes(_varint_bytes(s)) + bytes(rng.choice([0x0A, s % 256, 0x48], size=s).astype(np.uint8))
+        data = b"".join(b"\x0a" + wire.varint(s) + bytes(rng.choice([0x0A, s % 256, 0x48], size=s).astype(np.uint8))
                         for s in sizes)
         got = records.split_records(data)
         starts, lengths = _walk(data)
@@ -291,16 +291,6 @@ def test_split_records_skips_runs_of_one_length_exactly_like_a_record_walk():
         for cut in (1, 2, len(data) // 2):  # truncated messages are refused, never looped on
             if cut < len(data):
                 assert records.split_records(data[:-cut]) is None or _walk_ok(data[:-cut])
-
-
-def _varint_bytes(value: int) -> list[int]:
-    out = []
-    while True:
-        byte = value & 0x7F
-        value >>= 7
-        out.append(byte | (0x80 if value else 0))
-        if not value:
-            return out
 
 
 def _walk_ok(data: bytes) -> bool:

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trainer.protocol import wire
+
 # AgentInfoProto (spec §2): 7 reward f32, 8 done, 9 max_step_reached, 10 id int32,
 # 11 action_mask repeated bool (packed), 13 observations, 14 group_id int32, 15 group_reward f32
 _F32_FIELDS = (7, 15)
@@ -482,18 +484,8 @@ def _fields(data: bytes, start: int, end: int) -> list[tuple[int, int, int, int,
 def _replace(data: bytes, fields: list, index: int, number: int, body: bytes) -> bytes:
     """The message of ``fields`` with field ``index`` replaced by a length-delimited ``body``."""
     parts = [data[f[2]:f[4]] for f in fields]
-    key, size = _varint_bytes((number << 3) | 2), _varint_bytes(len(body))
-    parts[index] = key + size + body
+    parts[index] = wire.len_prefix(number, len(body)) + body
     return b"".join(parts)
-
-
-def _varint_bytes(value: int) -> bytes:
-    out = bytearray()
-    while value >= 0x80:
-        out.append((value & 0x7F) | 0x80)
-        value >>= 7
-    out.append(value)
-    return bytes(out)
 
 
 def _only(fields: list, number: int) -> int:
