@@ -80,7 +80,10 @@ def body_input(obs: list[np.ndarray], normalizers: list) -> np.ndarray:
     for x, norm in zip(obs, normalizers):
         x = np.asarray(x, dtype=np.float32)
         if norm is not None:
-            x = np.clip((x - norm[0]) / norm[1], -5.0, 5.0).astype(np.float32, copy=False)
+            x = (x - norm[0]) / norm[1]
+            np.maximum(x, -5.0, out=x)  # np.clip's values without its Python-level wrapper
+            np.minimum(x, 5.0, out=x)
+            x = x.astype(np.float32, copy=False)
         parts.append(x)
     return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
 

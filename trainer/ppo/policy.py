@@ -144,20 +144,26 @@ class Policy:
                 action = probs.argmax(axis=1)
             else:
                 u = torch.rand(n, generator=self.generator).numpy()[:, None]
-                action = (np.cumsum(probs, axis=1) <= u).sum(axis=1)
+                action = (probs.cumsum(axis=1) <= u).sum(axis=1)
                 # rounding can push u past the last cumulative sum: take the last allowed option
-                last_allowed = probs.shape[1] - 1 - np.argmax(probs[:, ::-1] > 0, axis=1)
+                last_allowed = probs.shape[1] - 1 - (probs[:, ::-1] > 0).argmax(axis=1)
                 action = np.minimum(action, last_allowed)
             chosen.append(action)
             log_parts.append(np.log(probs[rows, action] + EPSILON)[:, None])
-            entropy = entropy - np.sum(probs * np.log(probs + EPSILON), axis=1)
-        discrete = (np.stack(chosen, axis=1) if chosen else np.zeros((n, 0))).astype(np.int32)
+            entropy = entropy - (probs * np.log(probs + EPSILON)).sum(axis=1)
+        # the same arrays as stacking, clipping and concatenating, without numpy's Python-level
+        # wrappers (a third of a one-agent decision)
+        discrete = np.empty((n, len(chosen)), dtype=np.int32)
+        for index, action in enumerate(chosen):
+            discrete[:, index] = action
         raw = raw.astype(np.float32)
+        env_continuous = np.minimum(np.maximum(raw, -CONTINUOUS_CLIP), CONTINUOUS_CLIP) / CONTINUOUS_CLIP
+        log_probs = log_parts[0] if len(log_parts) == 1 else np.concatenate(log_parts, axis=1)
         return PolicyOutput(
-            env_actions=ActionTuple(np.clip(raw, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP, discrete),
+            env_actions=ActionTuple(env_continuous, discrete),
             continuous_raw=raw,
             discrete=discrete,
-            log_probs=np.concatenate(log_parts, axis=1).astype(np.float32),
+            log_probs=log_probs.astype(np.float32),
             entropy=entropy.astype(np.float32),
         )
 
