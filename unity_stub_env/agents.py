@@ -84,7 +84,7 @@ def encode_agent_infos(
         head, tail = _observation_frame(spec)
         parts += [head, wire.float_columns(obs, count), tail]
     parts += [_ID, wire.varint5_columns(episode_ids)]
-    return EncodedInfos(wire.repeated_messages(1, wire.rows(parts, count)), count)
+    return EncodedInfos(wire.repeated_rows(1, parts, count), count)
 
 
 def _varint5(value: int) -> bytes:

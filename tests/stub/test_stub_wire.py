@@ -77,6 +77,18 @@ def test_repeated_messages_prefix_each_row():
     assert wire.repeated_messages(1, np.zeros((0, 3), np.uint8)) == b""
 
 
+def test_rows_from_a_cached_layout_take_each_calls_values():
+    ids = np.array([[7], [9]], dtype=np.uint8)
+    first = wire.rows([b"\x08", ids, bytearray(b"\x10\x01")], 2)
+    assert first.tolist() == [[8, 7, 16, 1], [8, 9, 16, 1]]
+    again = wire.rows([b"\x08", ids + 1, b"\x10\x01"], 2)  # same layout, new values
+    assert again.tolist() == [[8, 8, 16, 1], [8, 10, 16, 1]] and first.tolist() == [[8, 7, 16, 1], [8, 9, 16, 1]]
+    assert wire.rows([b"\x08\x00", ids], 2).tolist() == [[8, 0, 7], [8, 0, 9]]  # another layout
+    # a record header as one more constant part: the same bytes as rows + repeated_messages
+    assert wire.repeated_rows(1, [b"\x08", ids], 2) == b"\x0a\x02\x08\x07\x0a\x02\x08\x09"
+    assert wire.repeated_rows(1, [], 2) == b"\x0a\x00\x0a\x00" and wire.repeated_rows(1, [ids], 0) == b""
+
+
 @pytest.mark.parametrize("task_name,areas", [("basic", 3), ("ball3d", 1)])
 @pytest.mark.parametrize("done", [False, True])
 @pytest.mark.parametrize("small_batch", [0, 10_000], ids=["byte-matrix", "per-agent"])

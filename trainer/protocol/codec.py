@@ -483,8 +483,7 @@ def encode_agent_actions(continuous: np.ndarray, discrete: np.ndarray) -> bytes 
         parts += [wire.len_prefix(6, 4 * c), wire.float_columns(continuous, n)]
     if b:
         parts += [wire.len_prefix(7, b), discrete.astype(np.uint8)]
-    content = wire.rows(parts, n) if parts else np.zeros((n, 0), dtype=np.uint8)
-    return wire.repeated_messages(1, content)
+    return wire.repeated_rows(1, parts, n)
 
 
 def _fill_agent_actions(value, continuous: np.ndarray, discrete: np.ndarray) -> None:

@@ -54,14 +54,15 @@ def float_columns(values: np.ndarray, n: int) -> np.ndarray:
     return values.view(np.uint8).reshape(n, -1)
 
 
+_VARINT5_SHIFTS = np.arange(0, 35, 7, dtype=np.int64)
+
+
 def varint5_columns(values: np.ndarray) -> np.ndarray:
     """Non-negative integers [n] (< 2**32) → uint8 [n, 5] fixed-width (overlong) varints."""
     values = np.asarray(values, dtype=np.int64)
     if values.size and (values.min() < 0 or values.max() >= 1 << 32):
         raise ValueError("fixed-width varints hold 0 <= value < 2**32")
-    out = np.empty((len(values), 5), dtype=np.uint8)
-    for index in range(5):
-        out[:, index] = (values >> (7 * index)) & 0x7F
+    out = ((values[:, None] >> _VARINT5_SHIFTS) & 0x7F).astype(np.uint8)
     out[:, :4] |= 0x80
     return out
 
@@ -70,24 +71,48 @@ def width(part: Part) -> int:
     return len(part) if isinstance(part, (bytes, bytearray)) else part.shape[1]
 
 
+# the constant bytes of a row layout, laid out once: (template row, [(column, width)] of the blocks)
+_TEMPLATES: dict[tuple, tuple[np.ndarray, list[tuple[int, int]]]] = {}
+
+
 def rows(parts: Sequence[Part], n: int) -> np.ndarray:
-    """uint8 [n, sum of widths]: constant parts repeated on every row, column blocks as given."""
-    total = sum(width(p) for p in parts)
-    out = np.empty((n, total), dtype=np.uint8)
-    column = 0
-    for part in parts:
-        w = width(part)
-        if isinstance(part, (bytes, bytearray)):
-            out[:, column : column + w] = np.frombuffer(bytes(part), dtype=np.uint8)
-        else:
-            out[:, column : column + w] = part
-        column += w
+    """uint8 [n, sum of widths]: constant parts repeated on every row, column blocks as given.
+
+    The constant parts of a layout are laid into a template row once (cached by layout); each
+    call copies the template into every row and writes only the column blocks.
+    """
+    parts = [bytes(p) if isinstance(p, bytearray) else p for p in parts]
+    key = tuple(p if isinstance(p, bytes) else p.shape[1] for p in parts)
+    cached = _TEMPLATES.get(key)
+    if cached is None:
+        template = np.zeros(sum(len(k) if isinstance(k, bytes) else k for k in key), dtype=np.uint8)
+        blocks, column = [], 0
+        for k in key:
+            if isinstance(k, bytes):
+                template[column:column + len(k)] = np.frombuffer(k, dtype=np.uint8)
+                column += len(k)
+            else:
+                blocks.append((column, k))
+                column += k
+        if len(_TEMPLATES) > 256:
+            _TEMPLATES.clear()
+        cached = _TEMPLATES[key] = (template, blocks)
+    template, blocks = cached
+    out = np.empty((n, len(template)), dtype=np.uint8)
+    out[:] = template
+    for (column, w), part in zip(blocks, [p for p in parts if not isinstance(p, bytes)]):
+        out[:, column:column + w] = part
     return out
+
+
+def repeated_rows(field_number: int, parts: Sequence[Part], n: int) -> bytes:
+    """``repeated_messages(field_number, rows(parts, n))`` in one pass: the record header is
+    one more constant part of the row."""
+    if n == 0:
+        return b""
+    return rows([len_prefix(field_number, sum(width(p) for p in parts)), *parts], n).tobytes()
 
 
 def repeated_messages(field_number: int, content: np.ndarray) -> bytes:
     """Serialized repeated message field: each row of ``content`` is one element's bytes."""
-    n, size = content.shape
-    if n == 0:
-        return b""
-    return rows([len_prefix(field_number, size), content], n).tobytes()
+    return repeated_rows(field_number, [content], content.shape[0])
