@@ -2,7 +2,9 @@
 
 ML-Agents keeps one Python object per agent and appends to lists per step. Here every agent of a
 (env, behavior) pair owns a *slot* in preallocated arrays of ``time_horizon`` rows, and each step
-writes all agents at once with fancy indexing. Python touches each agent only to map its episode
+writes all agents at once with fancy indexing. A decision's observation and action go straight
+into the slot's next row; when its reward arrives with the next step, only the reward is
+written and the row counted. Python touches each agent only to map its episode
 id to a slot (one dict lookup); per-trajectory work (emitting) is per agent, but that happens once
 per ``time_horizon`` steps or episode end, not every step.
 
@@ -68,13 +70,8 @@ class AgentTracker:
         self.mask = grow(g("mask"), (h, n_mask), bool)
         self.rewards = grow(g("rewards"), (h,), np.float32)
         self.length = grow(g("length"), (), np.int64)
-        # the decision awaiting its reward: observation, action, log-probs and mask of step t
+        # a decision awaits its reward: its observation and action sit in row ``length`` already
         self.pending = grow(g("pending"), (), bool)
-        self.p_obs = [grow(None if first else self.p_obs[i], s, np.float32) for i, s in enumerate(shapes)]
-        self.p_cont = grow(g("p_cont"), (a.continuous_size,), np.float32)
-        self.p_disc = grow(g("p_disc"), (a.discrete_size,), np.int32)
-        self.p_logp = grow(g("p_logp"), (a.continuous_size + a.discrete_size,), np.float32)
-        self.p_mask = grow(g("p_mask"), (n_mask,), bool)
         self.ep_reward = grow(g("ep_reward"), (), np.float64)
         self.ep_length = grow(g("ep_length"), (), np.int64)
         self._free.extend(range(cap - 1, self._cap - 1, -1))
@@ -101,14 +98,9 @@ class AgentTracker:
 
     # ------------------------------------------------------------- experience
     def _record(self, slots: np.ndarray, reward: np.ndarray) -> None:
-        """Close the pending decision of ``slots`` with the reward that just arrived."""
+        """Close the pending decision of ``slots`` (already in row ``length``) with the reward
+        that just arrived."""
         t = self.length[slots]
-        for i, buf in enumerate(self.obs):
-            buf[slots, t] = self.p_obs[i][slots]
-        self.cont[slots, t] = self.p_cont[slots]
-        self.disc[slots, t] = self.p_disc[slots]
-        self.logp[slots, t] = self.p_logp[slots]
-        self.mask[slots, t] = self.p_mask[slots]
         self.rewards[slots, t] = reward
         self.length[slots] = t + 1
         self.pending[slots] = False
@@ -169,8 +161,9 @@ class AgentTracker:
             full = np.nonzero(has & (self.length[slots] >= self.time_horizon))[0]
             for k in full:
                 emit(self._emit(int(slots[k]), [o[k] for o in ds.obs], False, False))
-        for i, o in enumerate(ds.obs):
-            self.p_obs[i][slots] = o
+        t = self.length[slots]  # below time_horizon: full trajectories were just cut
+        for buf, o in zip(self.obs, ds.obs):
+            buf[slots, t] = o
         return slots
 
     def on_actions(
@@ -182,13 +175,14 @@ class AgentTracker:
         action_mask: np.ndarray | None,
     ) -> None:
         """Store the policy's answer for the agents of the last ``on_decision`` call."""
-        self.p_cont[slots] = continuous_raw
-        self.p_disc[slots] = discrete
-        self.p_logp[slots] = log_probs
-        if action_mask is not None and self.p_mask.shape[-1] > 0:
-            self.p_mask[slots] = action_mask
+        t = self.length[slots]
+        self.cont[slots, t] = continuous_raw
+        self.disc[slots, t] = discrete
+        self.logp[slots, t] = log_probs
+        if action_mask is not None and self.mask.shape[-1] > 0:
+            self.mask[slots, t] = action_mask
         else:
-            self.p_mask[slots] = False
+            self.mask[slots, t] = False
         self.pending[slots] = True
 
     def drop_all(self) -> None:

@@ -113,3 +113,110 @@ def test_masks_are_concatenated_and_stored():
     tr.on_actions(slots, np.zeros((1, 0), np.float32), np.array([[0, 1]], np.int32), np.zeros((1, 2), np.float32), m)
     tr.on_decision(ds([1], [[0, 1]], [1]), out.append)
     assert out[0].action_masks.tolist() == [[False, True, True, False, False]]
+
+
+# ------------------------------------------------------------------ against a per-agent oracle
+HYBRID = BehaviorSpec(
+    (ObservationSpec((2,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "a"),
+     ObservationSpec((3,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "b")),
+    ActionSpec(2, (3, 2)),
+)
+
+
+class Oracle:
+    """The module's rules, one Python list per agent, as ML-Agents' AgentProcessor keeps them."""
+
+    def __init__(self, horizon):
+        self.horizon, self.agents, self.out, self.episodes = horizon, {}, [], []
+
+    def _close(self, agent, reward, ep_reward):
+        state = self.agents[agent]
+        if state["pending"] is not None:
+            state["rows"].append((*state["pending"], reward))
+            state["pending"] = None
+            state["ep"][0] += ep_reward
+            state["ep"][1] += 1
+
+    def _emit(self, agent, next_obs, done, interrupted):
+        rows = self.agents[agent]["rows"]
+        if rows:
+            # rows: (obs, continuous, discrete, log-probs, mask, reward)
+            self.out.append(([np.stack([r[0][i] for r in rows]) for i in range(2)], [o.copy() for o in next_obs],
+                             np.array([r[5] for r in rows], np.float32),
+                             *(np.stack([r[j] for r in rows]) for j in (1, 2, 3, 4)), done, interrupted))
+        self.agents[agent]["rows"] = []
+
+    def terminal(self, t):
+        for k, agent in enumerate(t.agent_id.tolist()):
+            if agent not in self.agents:
+                continue
+            self._close(agent, t.reward[k] + t.group_reward[k], float(t.reward[k]))
+            self._emit(agent, [o[k] for o in t.obs], True, bool(t.interrupted[k]))
+            reward, length = self.agents.pop(agent)["ep"]
+            self.episodes.append((reward, length))
+
+    def decision(self, d):
+        for k, agent in enumerate(d.agent_id.tolist()):
+            state = self.agents.setdefault(agent, {"pending": None, "rows": [], "ep": [0.0, 0]})
+            had = state["pending"] is not None
+            self._close(agent, d.reward[k] + d.group_reward[k], float(d.reward[k]))
+            if had and len(state["rows"]) >= self.horizon:
+                self._emit(agent, [o[k] for o in d.obs], False, False)
+            state["obs"] = [o[k].copy() for o in d.obs]
+
+    def actions(self, agents, cont, disc, logp, mask):
+        for k, agent in enumerate(agents):
+            self.agents[agent]["pending"] = (self.agents[agent]["obs"], cont[k], disc[k], logp[k], mask[k])
+
+
+def test_random_schedules_give_what_a_per_agent_list_gives():
+    """Agents that start, skip decisions, hit the time horizon, finish (done or interrupted),
+    terminate without ever deciding, and more agents than the initial capacity."""
+    rng = np.random.default_rng(11)
+    for horizon in (1, 2, 5):
+        tracker, oracle = AgentTracker(HYBRID, time_horizon=horizon, capacity=2), Oracle(horizon)
+        emitted, stats, next_id, alive = [], [], 0, []
+        for step in range(300):
+            if rng.random() < 0.3 or not alive:  # new agents join
+                alive += list(range(next_id, next_id + int(rng.integers(1, 4))))
+                next_id = alive[-1] + 1
+            ending = [a for a in alive if rng.random() < 0.1]
+            if rng.random() < 0.05:
+                ending.append(next_id + 1000)  # an agent that ends before it ever decided
+            if ending:
+                n = len(ending)
+                t = TerminalSteps(obs=[rng.normal(size=(n, 2)).astype(np.float32), rng.normal(size=(n, 3)).astype(np.float32)],
+                                  reward=rng.normal(size=n).astype(np.float32), interrupted=rng.random(n) < 0.5,
+                                  agent_id=np.array(ending, np.int64), group_id=np.zeros(n, np.int32),
+                                  group_reward=rng.normal(size=n).astype(np.float32))
+                tracker.on_terminal(t, emitted.append)
+                oracle.terminal(t)
+                alive = [a for a in alive if a not in ending]
+            deciding = [a for a in alive if rng.random() < 0.8]  # some skip this decision
+            n = len(deciding)
+            d = DecisionSteps(obs=[rng.normal(size=(n, 2)).astype(np.float32), rng.normal(size=(n, 3)).astype(np.float32)],
+                              reward=rng.normal(size=n).astype(np.float32), agent_id=np.array(deciding, np.int64),
+                              action_mask=None, group_id=np.zeros(n, np.int32),
+                              group_reward=(rng.normal(size=n) * (rng.random(n) < 0.3)).astype(np.float32))
+            slots = tracker.on_decision(d, emitted.append)
+            oracle.decision(d)
+            cont = rng.normal(size=(n, 2)).astype(np.float32)
+            disc = rng.integers(0, 2, size=(n, 2)).astype(np.int32)
+            logp = rng.normal(size=(n, 4)).astype(np.float32)
+            mask = rng.random((n, 5)) < 0.3
+            tracker.on_actions(slots, cont, disc, logp, mask)
+            oracle.actions(deciding, cont, disc, logp, mask)
+            episodes = tracker.drain_episodes()
+            stats += list(zip(episodes.rewards, episodes.lengths))
+        assert len(emitted) == len(oracle.out) > 50
+        assert stats == oracle.episodes and len(stats) > 20
+        for traj, (obs, next_obs, rewards, cont, disc, logp, mask, done, interrupted) in zip(emitted, oracle.out):
+            for got, want in zip(traj.obs + traj.next_obs, obs + next_obs):
+                np.testing.assert_array_equal(got, want)
+            np.testing.assert_array_equal(traj.rewards, rewards)
+            np.testing.assert_array_equal(traj.continuous_actions, cont)
+            np.testing.assert_array_equal(traj.discrete_actions, disc)
+            np.testing.assert_array_equal(traj.log_probs, logp)
+            np.testing.assert_array_equal(traj.action_masks, mask)
+            assert (traj.done, traj.interrupted) == (done, interrupted)
+            assert len(traj) <= horizon or done
