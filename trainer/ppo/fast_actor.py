@@ -45,15 +45,11 @@ class _Tracked:
         return False
 
 
-def _normalizer_modules(network_body) -> list:
-    return [encoder.normalizer for encoder in network_body.observation_encoder.encoders]
-
-
 def body_normalizers(network_body) -> list:
     """(mean, std) float32 per input, or None for an input without normaliser."""
     normalizers = []
     with torch.no_grad():
-        for norm in _normalizer_modules(network_body):
+        for norm in (encoder.normalizer for encoder in network_body.observation_encoder.encoders):
             if norm is None:
                 normalizers.append(None)
             else:

@@ -37,4 +37,3 @@ class Normalizer(nn.Module):
         self.running_variance.add_((to_new_mean * to_old_mean).sum(0))
         self.running_mean.copy_(new_mean)
         self.normalization_steps.copy_(total_steps)
-
