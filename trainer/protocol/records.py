@@ -248,18 +248,11 @@ def _cut(data: bytes) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int, int,
     length) of consecutive records of one length when every record is shorter than 128 bytes
     (2-byte headers), else None. None for anything but whole field-1 records."""
     end = len(data)
-    if end > 2 and data[0] == 0x0A and data[1] < 0x80 and end % (data[1] + 2) == 0:
-        # records of one length (the common case): check every header at once
-        stride = data[1] + 2
-        headers = np.frombuffer(data, dtype=np.uint8).reshape(-1, stride)[:, :2]
-        if (headers[:, 0] == 0x0A).all() and (headers[:, 1] == data[1]).all():
-            count = end // stride
-            return (2 + stride * np.arange(count, dtype=np.intp), np.full(count, data[1], dtype=np.intp),
-                    [(0, 0, count, data[1])])
     # records shorter than 128 bytes have 2-byte headers. Runs of records of one length are
     # skipped at once: from a known record start, the headers of the next ``count`` records of
     # the same length would sit at a fixed stride, and the run goes on for as long as they read
-    # (0x0A, length) (bytes.lstrip counts that in C). Each run ends where the length changes.
+    # (0x0A, length) (bytes.lstrip counts that in C). Each run ends where the length changes;
+    # records all of one length (the common case) are one run.
     runs: list[tuple[int, int, int, int]] = []
     pos = row = 0
     while pos + 1 < end and data[pos] == 0x0A and data[pos + 1] < 0x80:
