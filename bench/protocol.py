@@ -149,7 +149,7 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     """Per-exchange cost of each protocol piece, in one process and without gRPC (ms).
 
     Replays what both ends do around one exchange, with the stub's own Academy and our codec:
-    stub physics (advance), stub encode (collect_encoded + UnityMessageProto + serialize),
+    stub physics (advance), stub encode (collect_encoded + step_message_bytes),
     trainer decode (parse + decode_rl_output), trainer encode (fill_rl_input + serialize),
     stub decode (parse + apply_action_list). Whatever the real run takes beyond the sum is gRPC
     transport plus thread/process hand-offs.
@@ -157,6 +157,7 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     from protos.communicator_objects import unity_message_pb2
     from trainer.protocol import codec, records
     from unity_stub_env.academy import Academy
+    from unity_stub_env.communicator import step_message_bytes
 
     task = make_task(task_name, num_areas=num_areas, seed=0)
     academy = Academy(task)
@@ -166,17 +167,12 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     clock = time.perf_counter
     for _ in range(exchanges):
         t0 = clock()
-        message = unity_message_pb2.UnityMessageProto()
-        message.header.status = 200
-        message.unity_output.rl_output.agentInfos[spec_key].MergeFromString(academy.collect_encoded().data)
-        wire_up = message.SerializeToString()
+        wire_up = step_message_bytes([(spec_key, academy.collect_encoded().data)], b"", [])
         t1 = clock()
         if not known:  # brain parameters arrive once; build the spec from the first message
             from unity_stub_env.agents import build_brain_parameters
-            first = unity_message_pb2.UnityMessageProto.FromString(wire_up)
-            first.unity_output.rl_initialization_output.brain_parameters.append(
-                build_brain_parameters(spec_key, task.action_spec))
-            wire_up = first.SerializeToString()
+            wire_up = step_message_bytes([(spec_key, academy.collect_encoded().data)], b"",
+                                         [build_brain_parameters(spec_key, task.action_spec)])
         # as UnityEndpoint._wait_for_call + receive: large agent lists are decoded from the bytes
         split = records.split_agent_lists(wire_up, records.MIN_ROWS)
         body, raw_lists = split if split is not None else (wire_up, None)

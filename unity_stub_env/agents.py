@@ -19,9 +19,10 @@ from trainer.protocol import wire
 from trainer.protocol.types import ActionSpec, ObservationSpec
 
 
-# AgentInfoProto field tags (spec §2): reward 7 (float), done 8, max_step_reached 9, id 10 (varints)
-_REWARD, _DONE, _MAX_STEP, _ID = (wire.tag(7, wire.I32), wire.tag(8, wire.VARINT),
-                                  wire.tag(9, wire.VARINT), wire.tag(10, wire.VARINT))
+# AgentInfoProto fields (spec §2) in number order: reward 7 (float), done 8, max_step_reached 9,
+# id 10 (varints), action_mask 11 (packed bools), observations 13
+_REWARD, _ID = wire.tag(7, wire.I32), wire.tag(10, wire.VARINT)
+_DONE_TRUE, _MAX_STEP_TRUE = wire.tag(8, wire.VARINT) + b"\x01", wire.tag(9, wire.VARINT) + b"\x01"
 
 
 class EncodedInfos:
@@ -59,39 +60,98 @@ def encode_agent_infos(
     interrupted: np.ndarray | None = None,
     action_mask: np.ndarray | None = None,
 ) -> EncodedInfos:
-    """AgentInfoProtos as Unity's ``PutObservations`` writes them, serialized for all rows at once.
+    """AgentInfoProtos as Unity's ``PutObservations`` fills them, serialized as Unity's C#
+    protobuf writes them: fields in number order, the proto3 defaults left out (a zero reward,
+    done and max_step_reached when false, episode id 0), varints in their shortest form. Each
+    agent's ObservationProtos are shape, float_data, dimension_properties, observation_type, name.
 
-    Every agent's record has the same layout: reward (7), done (8), max_step_reached (9), the
-    action mask (11, packed), one ObservationProto per sensor (13: shape, float_data,
-    dimension_properties, observation_type, name) and the episode id (10) last as a 5-byte
-    varint, so the records form one byte matrix (see trainer.protocol.wire).
+    All records are laid out as one byte matrix (trainer.protocol.wire) with every field and id
+    byte that any of them needs; when records differ (a zero reward beside others, ids of
+    several varint lengths, some agents interrupted), a byte mask then drops what each record
+    leaves out, which also joins the records of different lengths.
     """
     count = len(episode_ids)
     if count == 0:
         return EncodedInfos()
+    rewards = np.ascontiguousarray(np.asarray(rewards, dtype="<f4").reshape(count))
+    ids = np.asarray(episode_ids, dtype=np.int64).reshape(count)
+    max_step = (np.asarray(interrupted, dtype=bool).reshape(count) if done and interrupted is not None
+                else None)
+    masks = (np.asarray(action_mask, dtype=bool).reshape(count, -1).astype(np.uint8)
+             if action_mask is not None else None)
     if count < wire.MIN_MATRIX_ROWS:
-        return _encode_few(observation_specs, observations, rewards, episode_ids, done, interrupted, action_mask)
-    parts: list = [_REWARD, wire.float_columns(rewards, count), _DONE + (b"\x01" if done else b"\x00"),
-                   _MAX_STEP]
-    flags = np.zeros((count, 1), dtype=np.uint8)
-    if done and interrupted is not None:
-        flags[:, 0] = np.asarray(interrupted, dtype=bool)
-    parts.append(flags)
-    if action_mask is not None:
-        mask = np.asarray(action_mask, dtype=bool).reshape(count, -1).astype(np.uint8)
-        parts += [wire.len_prefix(11, mask.shape[1]), mask]
+        return _encode_few(observation_specs, observations, rewards, ids, done, max_step, masks)
+    parts: list = []
+    keep: list = []  # per part: None (every record has it), bool [count] or bool [count, width]
+
+    def add(part, part_keep=None) -> None:
+        parts.append(part)
+        keep.append(part_keep)
+
+    has_reward = None if rewards.all() else rewards != 0
+    if has_reward is None or has_reward.any():
+        add(_REWARD, has_reward)
+        add(wire.float_columns(rewards, count), has_reward)
+    if done:
+        add(_DONE_TRUE)
+    if max_step is not None and max_step.any():
+        add(_MAX_STEP_TRUE, None if max_step.all() else max_step)
+    has_id = None if ids.all() else ids != 0
+    if has_id is None or has_id.any():
+        id_columns, id_used = wire.varint_columns(ids)
+        add(_ID, has_id)
+        if id_used is None:
+            add(id_columns, has_id)
+        else:
+            add(id_columns, id_used if has_id is None else id_used & has_id[:, None])
+    if masks is not None and masks.shape[1]:
+        add(wire.len_prefix(11, masks.shape[1]))
+        add(masks)
     for spec, obs in zip(observation_specs, observations):
         head, tail = _observation_frame(spec)
-        parts += [head, wire.float_columns(obs, count), tail]
-    parts += [_ID, wire.varint5_columns(episode_ids)]
-    return EncodedInfos(wire.repeated_rows(1, parts, count), count)
+        add(head)
+        add(wire.float_columns(obs, count))
+        add(tail)
+    if all(k is None for k in keep):  # the usual message: every record has the same layout
+        return EncodedInfos(wire.repeated_rows(1, parts, count), count)
+    widths = [wire.width(p) for p in parts]
+    content = np.full(count, sum(w for w, k in zip(widths, keep) if k is None), dtype=np.int64)
+    for w, k in zip(widths, keep):
+        if k is not None:
+            content += w * k if k.ndim == 1 else k.sum(axis=1)
+    length_columns, length_used = wire.varint_columns(content)
+    matrix = wire.rows([wire.tag(1, wire.LEN), length_columns, *parts], count)
+    present = np.ones(matrix.shape, dtype=bool)
+    column = 1
+    for w, k in zip([length_columns.shape[1], *widths], [length_used, *keep]):
+        if k is not None:
+            present[:, column:column + w] = k if k.ndim == 2 else k[:, None]
+        column += w
+    return EncodedInfos(matrix[present].tobytes(), count)
 
 
-def _varint5(value: int) -> bytes:
-    """``wire.varint5_columns`` for one id (0 <= value < 2**32)."""
-    if not 0 <= value < 1 << 32:
-        raise ValueError("fixed-width varints hold 0 <= value < 2**32")
-    return bytes(((value >> 7 * i) & 0x7F) | (0x80 if i < 4 else 0) for i in range(5))
+def _encode_few(observation_specs, observations, rewards, ids, done, max_step, masks) -> EncodedInfos:
+    """``encode_agent_infos`` for a handful of agents: each record's bytes joined in a loop."""
+    frames = [_observation_frame(spec) for spec in observation_specs]
+    flat_obs = [np.ascontiguousarray(np.asarray(obs, dtype="<f4").reshape(len(ids), -1)) for obs in observations]
+    mask_prefix = wire.len_prefix(11, masks.shape[1]) if masks is not None and masks.shape[1] else None
+    flags = max_step.tolist() if max_step is not None else [False] * len(ids)
+    records = []
+    for row, (reward, episode_id, interrupted) in enumerate(zip(rewards.tolist(), ids.tolist(), flags)):
+        parts = [_REWARD, rewards[row].tobytes()] if reward != 0 else []
+        if done:
+            parts.append(_DONE_TRUE)
+        if interrupted:
+            parts.append(_MAX_STEP_TRUE)
+        if episode_id:
+            parts += [_ID, wire.varint(episode_id)]
+        if mask_prefix is not None:
+            parts += [mask_prefix, masks[row].tobytes()]
+        for (head, tail), obs in zip(frames, flat_obs):
+            parts += [head, obs[row].tobytes(), tail]
+        content = b"".join(parts)
+        records.append(wire.len_prefix(1, len(content)) + content)
+    return EncodedInfos(b"".join(records), len(ids))
 
 
 @functools.lru_cache(maxsize=64)
@@ -109,32 +169,6 @@ def _observation_frame(spec: ObservationSpec) -> tuple[bytes, bytes]:
         name = spec.name.encode()
         tail += wire.len_prefix(8, len(name)) + name
     return wire.len_prefix(13, len(head) + 4 * size + len(tail)) + head, tail
-
-
-def _encode_few(observation_specs, observations, rewards, episode_ids, done, interrupted, action_mask
-                ) -> EncodedInfos:
-    """``encode_agent_infos`` for a handful of agents: the same record bytes, joined per agent."""
-    count = len(episode_ids)
-    frames = [_observation_frame(spec) for spec in observation_specs]
-    flat_obs = [np.ascontiguousarray(np.asarray(obs, dtype="<f4").reshape(count, -1)) for obs in observations]
-    reward_bytes = np.ascontiguousarray(np.asarray(rewards, dtype="<f4")).tobytes()
-    flags = (np.asarray(interrupted, dtype=bool).tolist() if done and interrupted is not None
-             else [False] * count)
-    masks = (np.asarray(action_mask, dtype=bool).reshape(count, -1).astype(np.uint8) if action_mask is not None
-             else None)
-    ids = b"".join(map(_varint5, np.asarray(episode_ids).tolist()))
-    done_field = _DONE + (b"\x01" if done else b"\x00")
-    records = []
-    for row in range(count):
-        parts = [_REWARD, reward_bytes[4 * row:4 * row + 4], done_field, _MAX_STEP + (b"\x01" if flags[row] else b"\x00")]
-        if masks is not None:
-            parts += [wire.len_prefix(11, masks.shape[1]), masks[row].tobytes()]
-        for (head, tail), obs in zip(frames, flat_obs):
-            parts += [head, obs[row].tobytes(), tail]
-        parts += [_ID, ids[5 * row:5 * row + 5]]
-        content = b"".join(parts)
-        records.append(wire.len_prefix(1, len(content)) + content)
-    return EncodedInfos(b"".join(records), count)
 
 
 class EpisodeIdCounter:

@@ -16,7 +16,6 @@ import threading
 import time
 import uuid
 
-import grpc
 from google.protobuf.message import DecodeError
 
 from protos.communicator_objects import (
@@ -27,6 +26,7 @@ from protos.communicator_objects import (
     unity_rl_initialization_output_pb2,
 )
 from trainer.protocol import side_channels as sc
+from trainer.protocol import wire
 from trainer.protocol.codec import all_true_capabilities
 from trainer.protocol.http2 import CallError, Http2Channel
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
@@ -82,6 +82,9 @@ class _GrpcioChannel:
     """grpcio's client with raw bytes (MLAGENTS_LIKE_TRANSPORT=grpcio); same calls as Http2Channel."""
 
     def __init__(self, host: str, port: int) -> None:
+        import grpc  # only for this transport: ~0.1 s of the default stub's start-up otherwise
+
+        self._grpc = grpc
         self._channel = grpc.insecure_channel(f"{host}:{port}", options=_CHANNEL_OPTIONS)
         self._exchange = self._channel.unary_unary(EXCHANGE_PATH)
         self._ready = grpc.channel_ready_future(self._channel)
@@ -90,7 +93,7 @@ class _GrpcioChannel:
         try:
             self._ready.result(timeout=timeout)
             return True
-        except grpc.FutureTimeoutError:
+        except self._grpc.FutureTimeoutError:
             return False
 
     def call(self, request: bytes, timeout: float | None = None) -> bytes:
@@ -98,7 +101,7 @@ class _GrpcioChannel:
         # still works.
         try:
             return self._exchange(request, timeout=timeout)
-        except grpc.RpcError as error:
+        except self._grpc.RpcError as error:
             raise CallError(error.code().name, error.details() or "") from None
 
     def close(self) -> None:
@@ -168,7 +171,8 @@ class RpcCommunicator:
             name=ACADEMY_NAME, communication_version=UNITY_COMMUNICATION_VERSION,
             package_version=UNITY_PACKAGE_VERSION, capabilities=all_true_capabilities(),  # Unity 3.0 reports all 7
         )
-        first = self._exchange_raw(_wrap(unity_output_pb2.UnityOutputProto(rl_initialization_output=academy)))
+        first = self._exchange_raw(
+            _wrap(unity_output_pb2.UnityOutputProto(rl_initialization_output=academy)).SerializeToString())
         init_input = first.unity_input.rl_initialization_input
         trainer_version = init_input.communication_version
         if not communication_versions_compatible(UNITY_COMMUNICATION_VERSION, trainer_version):
@@ -182,7 +186,7 @@ class RpcCommunicator:
                            "some features may not work.", trainer_version, UNITY_COMMUNICATION_VERSION)
         logger.info("Connected to trainer at %s (package version %s, communication version %s)",
                     self.address, init_input.package_version, trainer_version)
-        second = self._exchange_raw(_wrap(None))
+        second = self._exchange_raw(_wrap(None).SerializeToString())
         return init_input, second.unity_input.rl_input
 
     # Regular exchanges -----------------------------------------------------------------------
@@ -192,25 +196,19 @@ class RpcCommunicator:
         ``brain_parameters`` is attached only the first time a behavior is sent with at least one
         agent info (as Unity does). Raises SessionEnd on a non-200 answer, QUIT or a lost trainer.
         """
-        message = _wrap(None)
-        output = message.unity_output  # filled in place: no copy of the agent infos
-        first_time = []
-        for behavior_key, infos, brain_parameters in batches:
-            # protobuf's C parser; the message is re-serialized canonically when sent
-            output.rl_output.agentInfos[behavior_key].MergeFromString(infos.data)
-            if behavior_key not in self._sent_brain_keys and len(infos) > 0:
-                output.rl_initialization_output.brain_parameters.append(brain_parameters)
-                first_time.append(behavior_key)
-        output.rl_output.side_channel = side_channel
-        answer = self._exchange_raw(message)
-        self._sent_brain_keys.update(first_time)
+        first_time = [(key, brain) for key, infos, brain in batches
+                      if key not in self._sent_brain_keys and len(infos) > 0]
+        answer = self._exchange_raw(step_message_bytes(
+            [(key, infos.data) for key, infos, _ in batches], side_channel, [brain for _, brain in first_time]))
+        self._sent_brain_keys.update(key for key, _ in first_time)
         return answer.unity_input.rl_input
 
-    def _exchange_raw(self, message: unity_message_pb2.UnityMessageProto) -> unity_message_pb2.UnityMessageProto:
+    def _exchange_raw(self, message: bytes) -> unity_message_pb2.UnityMessageProto:
+        """Send a serialized UnityMessageProto; returns the parsed answer."""
         # A plain blocking call on this thread: no thread or future per exchange (the hot path);
         # a stop signal's SIGALRM interrupts it after the grace period.
         try:
-            raw = self._channel.call(message.SerializeToString())
+            raw = self._channel.call(message)
         except _AbortExchange:
             self.close(send_closing=True)
             raise SessionEnd("Stopped by a signal; sent status 400 to the trainer.", 0) from None
@@ -254,6 +252,34 @@ def _wrap(output, status: int = STATUS_OK) -> unity_message_pb2.UnityMessageProt
     if output is not None:
         message.unity_output.CopyFrom(output)
     return message
+
+
+_HEADER_OK = header_pb2.HeaderProto(status=STATUS_OK).SerializeToString()
+_HEADER_OK_FIELD = wire.len_prefix(1, len(_HEADER_OK)) + _HEADER_OK  # UnityMessageProto.header
+
+
+def step_message_bytes(lists: list[tuple[str, bytes]], side_channel: bytes, brain_parameters: list) -> bytes:
+    """The serialized UnityMessageProto of one step, written directly (no protobuf objects):
+    header status 200; unity_output (2) = rl_output (1) {one agentInfos (2) map entry per
+    behavior, in the given order as Unity's C# map keeps it: key (1), serialized
+    ListAgentInfoProto (2); side_channel (3) when not empty}, then rl_initialization_output (2)
+    holding ``brain_parameters`` when there are any. The same bytes protobuf writes for the
+    message built field by field (tests/stub/test_stub_wire.py); the agent infos are copied,
+    never parsed."""
+    parts = []
+    for key, data in lists:
+        name = key.encode()
+        entry = wire.len_prefix(1, len(name)) + name + wire.len_prefix(2, len(data)) + data
+        parts += [wire.len_prefix(2, len(entry)), entry]
+    if side_channel:
+        parts += [wire.len_prefix(3, len(side_channel)), side_channel]
+    rl_output = b"".join(parts)
+    output = wire.len_prefix(1, len(rl_output)) + rl_output
+    if brain_parameters:
+        init = unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
+            brain_parameters=brain_parameters).SerializeToString()
+        output += wire.len_prefix(2, len(init)) + init
+    return _HEADER_OK_FIELD + wire.len_prefix(2, len(output)) + output
 
 
 # Side channels -------------------------------------------------------------------------------

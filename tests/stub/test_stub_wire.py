@@ -60,14 +60,23 @@ def build_agent_infos(
     return infos
 
 
-def test_varints_and_fixed_width_varints_by_hand():
+def test_varints_varint_columns_and_interleaving_by_hand():
     assert wire.varint(0) == b"\x00" and wire.varint(127) == b"\x7f"
     assert wire.varint(300) == b"\xac\x02"  # the protobuf documentation's example
-    # 300 in five bytes: 0xac, then 0x02 with continuation bits up to the last byte
-    assert wire.varint5_columns(np.array([300, 0])).tolist() == [[0xAC, 0x82, 0x80, 0x80, 0x00],
-                                                                 [0x80, 0x80, 0x80, 0x80, 0x00]]
-    with pytest.raises(ValueError):
-        wire.varint5_columns(np.array([-1]))
+    assert wire.varint_lengths(np.array([0, 127, 128, 16383, 16384, 2**21, 2**28, 2**31 - 1])).tolist() == [
+        1, 1, 2, 2, 3, 4, 5, 5]
+    # 300 and 129 in two bytes each: low 7 bits with the continuation bit, then the rest
+    columns, used = wire.varint_columns(np.array([300, 129]))
+    assert columns.tolist() == [[0xAC, 0x02], [0x81, 0x01]] and used is None
+    # lengths 1, 2 and 3 side by side: left-aligned, continuation bits only inside each varint
+    columns, used = wire.varint_columns(np.array([5, 300, 16384]))
+    assert columns.tolist() == [[5, 0, 0], [0xAC, 0x02, 0], [0x80, 0x80, 0x01]]
+    assert used.tolist() == [[True, False, False], [True, True, False], [True, True, True]]
+    for bad in ([-1], [2**31]):
+        with pytest.raises(ValueError):
+            wire.varint_columns(np.array(bad))
+        with pytest.raises(ValueError):
+            wire.varint_lengths(np.array(bad))
     assert wire.tag(13, wire.LEN) == b"\x6a" and wire.len_prefix(1, 4) == b"\x0a\x04"
 
 
@@ -92,20 +101,63 @@ def test_rows_from_a_cached_layout_take_each_calls_values():
 @pytest.mark.parametrize("task_name,areas", [("basic", 3), ("ball3d", 1)])
 @pytest.mark.parametrize("done", [False, True])
 @pytest.mark.parametrize("small_batch", [0, 10_000], ids=["byte-matrix", "per-agent"])
-def test_encoded_infos_equal_protobufs_own_encoding(task_name, areas, done, small_batch, monkeypatch):
+@pytest.mark.parametrize("mixed", [True, False], ids=["mixed-layouts", "one-layout"])
+def test_encoded_infos_equal_protobufs_own_encoding(task_name, areas, done, small_batch, mixed, monkeypatch):
     monkeypatch.setattr(wire, "MIN_MATRIX_ROWS", small_batch)  # force one of the two encoders
     task = make_task(task_name, num_areas=areas, seed=0)
     task.reset()
     n = task.num_agents
     obs = task.observe()
-    rewards = np.linspace(-1, 1, n).astype(np.float32)
-    ids = np.array([0, 127, 128, 16383, 16384, 2**31 - 1] * 3)[:n]  # every varint length
-    interrupted = (np.arange(n) % 2 == 0) if done else None
+    if mixed:  # zero rewards, id 0 and every varint length: records of several layouts
+        rewards = np.linspace(-1, 1, n).astype(np.float32)
+        ids = np.array([0, 127, 128, 16383, 16384, 2**31 - 1] * 3)[:n]
+        interrupted = (np.arange(n) % 2 == 0) if done else None
+    else:
+        rewards = np.linspace(0.5, 1, n).astype(np.float32)
+        ids = 200 + np.arange(n)
+        interrupted = np.ones(n, bool) if done else None
     mask = task.action_mask()
     slow = ListAgentInfo()
     slow.value.extend(build_agent_infos(task.observation_specs, obs, rewards, ids, done, interrupted, mask))
     encoded = encode_agent_infos(task.observation_specs, obs, rewards, ids, done, interrupted, mask)
     fast = ListAgentInfo.FromString(encoded.data)
     assert len(encoded) == n == len(fast.value)
-    assert fast.SerializeToString() == slow.SerializeToString()
+    assert encoded.data == slow.SerializeToString()  # protobuf's own (C#'s) bytes, exactly
     assert [info.id for info in fast.value] == ids.tolist()
+
+
+@pytest.mark.parametrize("side_channel", [b"", b"\x01\x02side"])
+@pytest.mark.parametrize("first_time", [False, True])
+def test_step_message_bytes_equal_protobufs_own_encoding(side_channel, first_time):
+    """The stub's directly written step message against the message built field by field:
+    byte-equal for one behavior (also with an empty list), equal after parsing for two."""
+    from protos.communicator_objects import header_pb2, unity_message_pb2
+    from unity_stub_env.agents import build_brain_parameters
+    from unity_stub_env.communicator import step_message_bytes
+
+    lists = []
+    for task_name, areas in (("ball3d", 1), ("basic", 3), ("basic", 0)):
+        task = make_task(task_name, num_areas=max(areas, 1), seed=0)
+        task.reset()
+        n = task.num_agents if areas else 0
+        encoded = encode_agent_infos(task.observation_specs, [o[:n] for o in task.observe()],
+                                     np.ones(n, np.float32), np.arange(n), False)
+        brain = build_brain_parameters(f"{task.behavior_name}?team=0", task.action_spec)
+        lists.append((f"{task.behavior_name}{areas}?team=0", encoded.data, brain))
+    for chosen in ([lists[0]], [lists[2]], lists):
+        brains = [brain for _, _, brain in chosen] if first_time else []
+        expected = unity_message_pb2.UnityMessageProto(header=header_pb2.HeaderProto(status=200))
+        rl_output = expected.unity_output.rl_output
+        for key, data, _ in chosen:
+            rl_output.agentInfos[key].MergeFromString(data)
+        rl_output.side_channel = side_channel
+        expected.unity_output.rl_initialization_output.brain_parameters.extend(brains)
+        if not brains:
+            expected.unity_output.ClearField("rl_initialization_output")
+        written = step_message_bytes([(key, data) for key, data, _ in chosen], side_channel, brains)
+        parsed = unity_message_pb2.UnityMessageProto.FromString(written)
+        assert parsed == expected
+        where = [written.index(key.encode()) for key, _, _ in chosen]
+        assert where == sorted(where)  # the map entries in the order given, as C# keeps them
+        if len(chosen) == 1:
+            assert written == expected.SerializeToString()

@@ -2,15 +2,13 @@
 
 A repeated message field whose elements all have the same layout (the same fields, the same
 lengths) serializes to rows of equal width: ``tag, length, content``. Building those rows as one
-uint8 matrix replaces a Python loop that fills one message object per agent; the bytes are then
-merged into the real message with ``MergeFromString`` (protobuf's C parser), so what finally goes
-on the wire is still protobuf's own canonical serialization.
+uint8 matrix replaces a Python loop that fills one message object per agent. Records of a few
+different lengths are built as one matrix of the longest layout, and a byte mask drops what
+each record leaves out.
 
 Field layouts used here (proto3, spec §2): packed repeated scalars are ``tag(LEN), byte length,
 values``; a float is ``tag(I32)`` + 4 little-endian bytes; a varint field is ``tag(VARINT)`` +
-varint. Integers whose varint length could differ between records are written as 5-byte varints
-(continuation bits on the first four bytes), which every protobuf parser accepts and which the
-merge turns back into the shortest form.
+the shortest varint (``varint_columns`` for a column of integers).
 """
 from __future__ import annotations
 
@@ -54,17 +52,37 @@ def float_columns(values: np.ndarray, n: int) -> np.ndarray:
     return values.view(np.uint8).reshape(n, -1)
 
 
-_VARINT5_SHIFTS = np.arange(0, 35, 7, dtype=np.int64)
+_VARINT_SHIFTS = np.arange(0, 35, 7, dtype=np.int64)
+_VARINT_LIMITS = (1 << _VARINT_SHIFTS[1:])  # a varint of 0 <= v < 2**35 is 1 + (v >= each) bytes
 
 
-def varint5_columns(values: np.ndarray) -> np.ndarray:
-    """Non-negative integers [n] (< 2**32) → uint8 [n, 5] fixed-width (overlong) varints."""
+def varint_lengths(values: np.ndarray) -> np.ndarray:
+    """int64 [n]: the shortest varint length (1-5 bytes) of each integer 0 <= v < 2**31."""
     values = np.asarray(values, dtype=np.int64)
-    if values.size and (values.min() < 0 or values.max() >= 1 << 32):
-        raise ValueError("fixed-width varints hold 0 <= value < 2**32")
-    out = ((values[:, None] >> _VARINT5_SHIFTS) & 0x7F).astype(np.uint8)
-    out[:, :4] |= 0x80
-    return out
+    if values.size and (values.min() < 0 or values.max() >= 1 << 31):
+        raise ValueError("varint columns hold 0 <= value < 2**31 (non-negative int32)")
+    return 1 + (values[:, None] >= _VARINT_LIMITS).sum(axis=1)
+
+
+def varint_columns(values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Integers [n] (0 <= v < 2**31) → (uint8 [n, w], bool [n, w] or None): each one's shortest
+    varint, left-aligned in as many columns as the longest needs, and which columns each uses
+    (None when all use all w)."""
+    values = np.asarray(values, dtype=np.int64)
+    low, high = (int(values.min()), int(values.max())) if values.size else (0, 0)
+    if low < 0 or high >= 1 << 31:
+        raise ValueError("varint columns hold 0 <= value < 2**31 (non-negative int32)")
+    width = len(varint(high))
+    if width == 1:
+        return values.astype(np.uint8)[:, None], None
+    columns = ((values[:, None] >> _VARINT_SHIFTS[:width]) & 0x7F).astype(np.uint8)
+    if width == len(varint(low)):  # all of one length: no per-value work
+        columns[:, :width - 1] |= 0x80
+        return columns, None
+    lengths = varint_lengths(values)
+    position = np.arange(width)
+    columns[position < lengths[:, None] - 1] |= 0x80
+    return columns, position < lengths[:, None]
 
 
 def width(part: Part) -> int:
@@ -116,3 +134,4 @@ def repeated_rows(field_number: int, parts: Sequence[Part], n: int) -> bytes:
 def repeated_messages(field_number: int, content: np.ndarray) -> bytes:
     """Serialized repeated message field: each row of ``content`` is one element's bytes."""
     return repeated_rows(field_number, [content], content.shape[0])
+
