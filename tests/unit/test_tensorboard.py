@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from tensorboard.compat.proto import event_pb2
 
 from trainer.artifacts.stats import StatsAggregationMethod as Agg, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter, hyperparameters_markdown
@@ -153,3 +155,26 @@ def test_markdown_escapes_pipes_and_empty_dicts():
     assert hyperparameters_markdown({"a": "x|y", "b": {}}) == (
         "| Parameter | Value |\n|---|---|\n| a | x\\|y |\n| b | {} |"
     )
+
+
+def test_crc32c_and_tfrecord_framing_by_hand(tmp_path):
+    from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
+
+    from trainer.artifacts.tensorboard import EventFile, crc32c, masked_crc32c
+
+    assert crc32c(b"123456789") == 0xE3069283  # the standard CRC-32C check value
+    assert crc32c(b"") == 0
+    # masking: rotate right by 15, add 0xa282ead8 (mod 2**32)
+    crc = 0xE3069283
+    assert masked_crc32c(b"123456789") == (((crc >> 15) | (crc << 17)) + 0xA282EAD8) % 2**32
+    events = EventFile(str(tmp_path), wall_clock=lambda: 1234567890.5)
+    events.add_event(event_pb2.Event(step=7, wall_time=1.0))
+    events.close()
+    assert Path(events.path).name.startswith("events.out.tfevents.1234567890.")
+    raw = Path(events.path).read_bytes()
+    first = event_pb2.Event(wall_time=1234567890.5, file_version="brain.Event:2").SerializeToString()
+    header = len(first).to_bytes(8, "little")
+    assert raw.startswith(header + masked_crc32c(header).to_bytes(4, "little") + first
+                          + masked_crc32c(first).to_bytes(4, "little"))
+    loaded = list(EventFileLoader(events.path).Load())  # tensorboard's reader checks both CRCs
+    assert [e.file_version for e in loaded] == ["brain.Event:2", ""] and loaded[1].step == 7
