@@ -26,9 +26,7 @@ import socket
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import Callable, Mapping
-
-import grpc
+from typing import TYPE_CHECKING, Callable, Mapping
 
 from google.protobuf.message import DecodeError
 
@@ -43,6 +41,9 @@ from trainer.errors import (
 from trainer.protocol import codec, records
 from trainer.protocol.http2 import GRPC_INTERNAL, Http2Transport
 from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
+
+if TYPE_CHECKING:  # grpcio is imported by its transport only (MLAGENTS_LIKE_TRANSPORT=grpcio)
+    import grpc
 from trainer.stop import STOP
 
 logger = logging.getLogger(__name__)
@@ -99,6 +100,8 @@ class _PendingCall:
 
     def fail(self, status: int, message: str) -> None:
         if self.response is None and self.error is None:
+            import grpc
+
             code = next((c for c in grpc.StatusCode if c.value[0] == status), grpc.StatusCode.INTERNAL)
             self.error = (code, message)
         self._answered.set()
@@ -126,6 +129,8 @@ class _GrpcioTransport:
         self.client_gone = False
 
     def start(self) -> None:
+        import grpc
+
         server = grpc.server(
             ThreadPoolExecutor(max_workers=4, thread_name_prefix=f"unity-endpoint-{self.port}"),
             options=[
