@@ -4,9 +4,9 @@ ML-Agents keeps one Python object per agent and appends to lists per step. Here 
 (env, behavior) pair owns a *slot* in preallocated arrays of ``time_horizon`` rows, and each step
 writes all agents at once with fancy indexing. A decision's observation and action go straight
 into the slot's next row; when its reward arrives with the next step, only the reward is
-written and the row counted. Python touches each agent only to map its episode
-id to a slot (one dict lookup); per-trajectory work (emitting) is per agent, but that happens once
-per ``time_horizon`` steps or episode end, not every step.
+written and the row counted. Episode ids map to slots through a sorted index (searchsorted),
+so Python touches an agent only when its episode starts or a trajectory is emitted (once per
+``time_horizon`` steps or episode end), not every step.
 
 Rules (spec §10 "Experience assembly"):
 - the reward that arrives with observation t+1 is paired with the observation and action of t;
@@ -42,6 +42,7 @@ class AgentTracker:
         self.spec = spec
         self.time_horizon = int(time_horizon)
         self._slot_of: dict[int, int] = {}
+        self._index: tuple[np.ndarray, np.ndarray] | None = None  # _slot_of sorted by id
         self._free: list[int] = []
         self._cap = 0
         self.episodes = EpisodeStats()
@@ -78,19 +79,39 @@ class AgentTracker:
         self._cap = cap
 
     def _slots(self, agent_ids: np.ndarray) -> np.ndarray:
+        """int64 [n]: the slot of each episode id (unique ids); a new id gets a free slot.
+
+        Looked up in a sorted copy of the id -> slot map, so agents that are already known cost
+        no Python per agent; only new episodes go through the dict."""
+        ids = np.asarray(agent_ids, dtype=np.int64)
+        keys, slots = self._sorted_index()
+        pos = np.searchsorted(keys, ids).clip(max=max(len(keys) - 1, 0))
+        known = keys[pos] == ids if len(keys) else np.zeros(len(ids), dtype=bool)
+        if known.all():
+            return slots[pos]
         slot_of = self._slot_of
-        missing = [int(i) for i in agent_ids if int(i) not in slot_of]
-        if missing:
-            if len(missing) > len(self._free):
-                self._alloc(max(self._cap * 2, self._cap + len(missing)))
-            for agent in missing:
-                s = self._free.pop()
-                slot_of[agent] = s
-                self.pending[s] = False
-                self.length[s] = 0
-                self.ep_reward[s] = 0.0
-                self.ep_length[s] = 0
-        return np.fromiter((slot_of[int(i)] for i in agent_ids), dtype=np.int64, count=len(agent_ids))
+        missing = [agent for agent in dict.fromkeys(ids[~known].tolist()) if agent not in slot_of]
+        if len(missing) > len(self._free):
+            self._alloc(max(self._cap * 2, self._cap + len(missing)))
+        for agent in missing:
+            s = self._free.pop()
+            slot_of[agent] = s
+            self.pending[s] = False
+            self.length[s] = 0
+            self.ep_reward[s] = 0.0
+            self.ep_length[s] = 0
+        self._index = None
+        keys, slots = self._sorted_index()
+        return slots[np.searchsorted(keys, ids)]
+
+    def _sorted_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """(episode ids ascending, their slots), rebuilt after the map changed."""
+        if self._index is None:
+            count = len(self._slot_of)
+            keys = np.fromiter(self._slot_of.keys(), dtype=np.int64, count=count)
+            order = np.argsort(keys)
+            self._index = keys[order], np.fromiter(self._slot_of.values(), dtype=np.int64, count=count)[order]
+        return self._index
 
     @property
     def num_agents(self) -> int:
@@ -144,6 +165,7 @@ class AgentTracker:
             self.episodes.rewards.append(float(self.ep_reward[slot]))
             self.episodes.lengths.append(int(self.ep_length[slot]))
             del self._slot_of[int(ts.agent_id[k])]
+            self._index = None
             self._free.append(slot)
 
     def on_decision(self, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
@@ -189,6 +211,7 @@ class AgentTracker:
         """After a RESET or an env restart: in-progress trajectories are thrown away."""
         self._free.extend(self._slot_of.values())
         self._slot_of.clear()
+        self._index = None
 
     def drain_episodes(self) -> EpisodeStats:
         out, self.episodes = self.episodes, EpisodeStats()

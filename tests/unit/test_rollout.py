@@ -220,3 +220,24 @@ def test_random_schedules_give_what_a_per_agent_list_gives():
             np.testing.assert_array_equal(traj.action_masks, mask)
             assert (traj.done, traj.interrupted) == (done, interrupted)
             assert len(traj) <= horizon or done
+
+
+def test_slots_follow_episode_ids_in_any_order_and_are_reused():
+    tracker = AgentTracker(SPEC, time_horizon=3, capacity=2)
+    first = tracker._slots(np.array([70, 5, 300]))  # unsorted, more than the capacity
+    assert len(set(first.tolist())) == 3 and tracker.num_agents == 3
+    # known ids in another order and a subset map to the same slots, whatever the order
+    assert tracker._slots(np.array([300, 70])).tolist() == [first[2], first[0]]
+    assert tracker._slots(np.array([5, 70, 300])).tolist() == [first[1], first[0], first[2]]
+    # 5's episode ends: its slot is freed and the next new episode (id 900) takes it
+    act(tracker, tracker.on_decision(ds([70, 5, 300], np.zeros(6), [0, 0, 0]), lambda t: None), [0, 1, 2])
+    tracker.on_terminal(ts([5], [0, 0], [1.0], [False]), lambda t: None)
+    assert tracker.num_agents == 2
+    mixed = tracker._slots(np.array([900, 300, 70]))
+    assert mixed.tolist() == [first[1], first[2], first[0]]
+    # an id seen again after its episode ended is a new agent (fresh slot state), not a stale entry
+    tracker.on_terminal(ts([900], [0, 0], [1.0], [False]), lambda t: None)
+    tracker._slots(np.array([900]))
+    assert tracker.num_agents == 3 and tracker.length[first[1]] == 0
+    tracker.drop_all()
+    assert tracker.num_agents == 0 and len(set(tracker._slots(np.array([1, 2, 3])).tolist())) == 3
