@@ -41,10 +41,10 @@ from trainer.errors import (
 from trainer.protocol import codec, records
 from trainer.protocol.http2 import GRPC_INTERNAL, Http2Transport
 from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
+from trainer.stop import STOP
 
 if TYPE_CHECKING:  # grpcio is imported by its transport only (MLAGENTS_LIKE_TRANSPORT=grpcio)
     import grpc
-from trainer.stop import STOP
 
 logger = logging.getLogger(__name__)
 

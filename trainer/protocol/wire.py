@@ -53,15 +53,7 @@ def float_columns(values: np.ndarray, n: int) -> np.ndarray:
 
 
 _VARINT_SHIFTS = np.arange(0, 35, 7, dtype=np.int64)
-_VARINT_LIMITS = (1 << _VARINT_SHIFTS[1:])  # a varint of 0 <= v < 2**35 is 1 + (v >= each) bytes
-
-
-def varint_lengths(values: np.ndarray) -> np.ndarray:
-    """int64 [n]: the shortest varint length (1-5 bytes) of each integer 0 <= v < 2**31."""
-    values = np.asarray(values, dtype=np.int64)
-    if values.size and (values.min() < 0 or values.max() >= 1 << 31):
-        raise ValueError("varint columns hold 0 <= value < 2**31 (non-negative int32)")
-    return 1 + (values[:, None] >= _VARINT_LIMITS).sum(axis=1)
+_VARINT_LIMITS = 1 << _VARINT_SHIFTS[1:]  # a varint of 0 <= v < 2**35 is 1 + (v >= each) bytes
 
 
 def varint_columns(values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -79,7 +71,7 @@ def varint_columns(values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     if width == len(varint(low)):  # all of one length: no per-value work
         columns[:, :width - 1] |= 0x80
         return columns, None
-    lengths = varint_lengths(values)
+    lengths = 1 + (values[:, None] >= _VARINT_LIMITS[:width - 1]).sum(axis=1)
     position = np.arange(width)
     columns[position < lengths[:, None] - 1] |= 0x80
     return columns, position < lengths[:, None]
@@ -134,4 +126,3 @@ def repeated_rows(field_number: int, parts: Sequence[Part], n: int) -> bytes:
 def repeated_messages(field_number: int, content: np.ndarray) -> bytes:
     """Serialized repeated message field: each row of ``content`` is one element's bytes."""
     return repeated_rows(field_number, [content], content.shape[0])
-
