@@ -84,13 +84,11 @@ class AgentTracker:
         Looked up in a sorted copy of the id -> slot map, so agents that are already known cost
         no Python per agent; only new episodes go through the dict."""
         ids = np.asarray(agent_ids, dtype=np.int64)
-        keys, slots = self._sorted_index()
-        pos = np.searchsorted(keys, ids).clip(max=max(len(keys) - 1, 0))
-        known = keys[pos] == ids if len(keys) else np.zeros(len(ids), dtype=bool)
+        found, known = self._lookup(ids)
         if known.all():
-            return slots[pos]
+            return found
         slot_of = self._slot_of
-        missing = [agent for agent in dict.fromkeys(ids[~known].tolist()) if agent not in slot_of]
+        missing = list(dict.fromkeys(ids[~known].tolist()))  # the index is in step with slot_of
         if len(missing) > len(self._free):
             self._alloc(max(self._cap * 2, self._cap + len(missing)))
         for agent in missing:
@@ -101,8 +99,15 @@ class AgentTracker:
             self.ep_reward[s] = 0.0
             self.ep_length[s] = 0
         self._index = None
+        return self._lookup(ids)[0]
+
+    def _lookup(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(slot int64 [n], known bool [n]) of episode ids; a slot is meaningless where unknown."""
         keys, slots = self._sorted_index()
-        return slots[np.searchsorted(keys, ids)]
+        if len(keys) == 0:
+            return np.zeros(len(ids), dtype=np.int64), np.zeros(len(ids), dtype=bool)
+        pos = np.searchsorted(keys, ids).clip(max=len(keys) - 1)
+        return slots[pos], keys[pos] == ids
 
     def _sorted_index(self) -> tuple[np.ndarray, np.ndarray]:
         """(episode ids ascending, their slots), rebuilt after the map changed."""
@@ -147,11 +152,11 @@ class AgentTracker:
         """Agents whose episode ended: final reward, trajectory with done, episode stats."""
         if len(ts) == 0:
             return
-        known = np.array([int(i) in self._slot_of for i in ts.agent_id], dtype=bool)
+        found, known = self._lookup(np.asarray(ts.agent_id, dtype=np.int64))
         if not known.any():
             return  # ended before ever deciding: nothing was experienced
         idx = np.nonzero(known)[0]
-        slots = self._slots(ts.agent_id[idx])
+        slots = found[idx]
         has = self.pending[slots]
         if has.any():
             s = slots[has]
@@ -165,8 +170,8 @@ class AgentTracker:
             self.episodes.rewards.append(float(self.ep_reward[slot]))
             self.episodes.lengths.append(int(self.ep_length[slot]))
             del self._slot_of[int(ts.agent_id[k])]
-            self._index = None
             self._free.append(slot)
+        self._index = None
 
     def on_decision(self, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
         """Agents asking for a decision: pair their reward with the previous action, cut at
