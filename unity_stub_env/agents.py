@@ -114,20 +114,19 @@ def encode_agent_infos(
         add(tail)
     if all(k is None for k in keep):  # the usual message: every record has the same layout
         return EncodedInfos(wire.repeated_rows(1, parts, count), count)
-    widths = [wire.width(p) for p in parts]
-    content = np.full(count, sum(w for w, k in zip(widths, keep) if k is None), dtype=np.int64)
-    for w, k in zip(widths, keep):
-        if k is not None:
-            content += w * k if k.ndim == 1 else k.sum(axis=1)
-    length_columns, length_used = wire.varint_columns(content)
-    matrix = wire.rows([wire.tag(1, wire.LEN), length_columns, *parts], count)
-    present = np.ones(matrix.shape, dtype=bool)
-    column = 1
-    for w, k in zip([length_columns.shape[1], *widths], [length_used, *keep]):
+    content = wire.rows(parts, count)
+    present = np.ones(content.shape, dtype=bool)  # which bytes of the widest layout a record has
+    column = 0
+    for part, k in zip(parts, keep):
+        w = wire.width(part)
         if k is not None:
             present[:, column:column + w] = k if k.ndim == 2 else k[:, None]
         column += w
-    return EncodedInfos(matrix[present].tobytes(), count)
+    length_columns, length_used = wire.varint_columns(present.sum(axis=1))
+    header_present = np.ones(length_columns.shape, dtype=bool) if length_used is None else length_used
+    records = wire.rows([wire.tag(1, wire.LEN), length_columns, content], count)
+    present = np.concatenate([np.ones((count, 1), dtype=bool), header_present, present], axis=1)
+    return EncodedInfos(records[present].tobytes(), count)
 
 
 def _encode_few(observation_specs, observations, rewards, ids, done, max_step, masks) -> EncodedInfos:
