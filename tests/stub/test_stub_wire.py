@@ -81,10 +81,10 @@ def test_varints_varint_columns_and_interleaving_by_hand():
     assert wire.tag(13, wire.LEN) == b"\x6a" and wire.len_prefix(1, 4) == b"\x0a\x04"
 
 
-def test_repeated_messages_prefix_each_row():
+def test_repeated_rows_prefix_each_row():
     content = np.array([[1, 2], [3, 4]], dtype=np.uint8)
-    assert wire.repeated_messages(1, content) == b"\x0a\x02\x01\x02\x0a\x02\x03\x04"
-    assert wire.repeated_messages(1, np.zeros((0, 3), np.uint8)) == b""
+    assert wire.repeated_rows(1, [content], 2) == b"\x0a\x02\x01\x02\x0a\x02\x03\x04"
+    assert wire.repeated_rows(1, [np.zeros((0, 3), np.uint8)], 0) == b""
 
 
 def test_rows_from_a_cached_layout_take_each_calls_values():
@@ -94,7 +94,7 @@ def test_rows_from_a_cached_layout_take_each_calls_values():
     again = wire.rows([b"\x08", ids + 1, b"\x10\x01"], 2)  # same layout, new values
     assert again.tolist() == [[8, 8, 16, 1], [8, 10, 16, 1]] and first.tolist() == [[8, 7, 16, 1], [8, 9, 16, 1]]
     assert wire.rows([b"\x08\x00", ids], 2).tolist() == [[8, 0, 7], [8, 0, 9]]  # another layout
-    # a record header as one more constant part: the same bytes as rows + repeated_messages
+    # constant parts and column blocks together, each row behind its record header
     assert wire.repeated_rows(1, [b"\x08", ids], 2) == b"\x0a\x02\x08\x07\x0a\x02\x08\x09"
     assert wire.repeated_rows(1, [], 2) == b"\x0a\x00\x0a\x00" and wire.repeated_rows(1, [ids], 0) == b""
 

@@ -116,13 +116,9 @@ def rows(parts: Sequence[Part], n: int) -> np.ndarray:
 
 
 def repeated_rows(field_number: int, parts: Sequence[Part], n: int) -> bytes:
-    """``repeated_messages(field_number, rows(parts, n))`` in one pass: the record header is
-    one more constant part of the row."""
+    """A serialized repeated message field of n elements whose bytes are ``rows(parts, n)``:
+    each element's header (tag, length) is one more constant part of its row."""
     if n == 0:
         return b""
     return rows([len_prefix(field_number, sum(width(p) for p in parts)), *parts], n).tobytes()
 
-
-def repeated_messages(field_number: int, content: np.ndarray) -> bytes:
-    """Serialized repeated message field: each row of ``content`` is one element's bytes."""
-    return repeated_rows(field_number, [content], content.shape[0])
