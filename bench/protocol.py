@@ -157,6 +157,7 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     from protos.communicator_objects import unity_message_pb2
     from trainer.protocol import codec, records
     from unity_stub_env.academy import Academy
+    from unity_stub_env.agents import build_brain_parameters
     from unity_stub_env.communicator import step_message_bytes
 
     task = make_task(task_name, num_areas=num_areas, seed=0)
@@ -165,14 +166,11 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     known: dict = {}
     totals = dict.fromkeys(("stub_physics", "stub_encode", "trainer_decode", "trainer_encode", "stub_decode"), 0.0)
     clock = time.perf_counter
+    brains = [build_brain_parameters(spec_key, task.action_spec)]  # sent with the first message only
     for _ in range(exchanges):
         t0 = clock()
-        wire_up = step_message_bytes([(spec_key, academy.collect_encoded().data)], b"", [])
+        wire_up = step_message_bytes([(spec_key, academy.collect_encoded().data)], b"", [] if known else brains)
         t1 = clock()
-        if not known:  # brain parameters arrive once; build the spec from the first message
-            from unity_stub_env.agents import build_brain_parameters
-            wire_up = step_message_bytes([(spec_key, academy.collect_encoded().data)], b"",
-                                         [build_brain_parameters(spec_key, task.action_spec)])
         # as UnityEndpoint._wait_for_call + receive: large agent lists are decoded from the bytes
         split = records.split_agent_lists(wire_up, records.MIN_ROWS)
         body, raw_lists = split if split is not None else (wire_up, None)
