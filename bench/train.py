@@ -7,7 +7,9 @@ One run trains the same stub task with the same YAML twice, one process after th
   (1) ours:      ``.venv/bin/mlagents-like-learn CONFIG --env stub:TASK``
   (2) reference: ``.venv-interop/bin/mlagents-learn CONFIG --env <tmp>/Stub<Task>.x86_64``, a shell
                  launcher that execs this interpreter's ``-m unity_stub_env.cli --task TASK``.
-Both get the same ``--seed``, ``--num-areas``, a fresh results dir and a fresh port.
+Both get the same ``--seed``, ``--num-areas``, a fresh results dir and a fresh port, and the same
+simulator: the launcher passes the stub the ``--spin-wait-ms`` that our trainer passes it for one
+environment on this machine (trainer/protocol/pacing.py).
 
 The YAML is copied to a temp dir and, for BOTH trainers alike, ``max_steps`` is overridden when
 ``--max-steps`` is given and ``checkpoint_interval`` is raised above ``max_steps``: mlagents 1.1.0
@@ -47,6 +49,7 @@ from pathlib import Path
 
 import yaml
 
+from trainer.protocol.pacing import spin_budget
 from unity_stub_env.launcher import write_player_launcher
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -77,7 +80,9 @@ def free_port() -> int:
 
 def stub_launcher(folder: Path, task: str) -> Path:
     """``folder/Stub<Task>.x86_64``: a Unity-build-like shell launcher of the stub (our venv's Python)."""
-    return write_player_launcher(folder, [task], python=str(OUR_PYTHON))
+    spin = spin_budget(2)  # as mlagents-like-learn decides for --num-envs 1 (trainer/envs/pool.py)
+    extra = ["--spin-wait-ms", f"{spin * 1e3:g}"] if spin else []
+    return write_player_launcher(folder, [task], python=str(OUR_PYTHON), extra_args=extra)
 
 
 def write_bench_config(source: Path, target: Path, max_steps: int | None) -> dict:

@@ -44,6 +44,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="control steps between decisions (default: the task's)")
     parser.add_argument("--connect-timeout", type=float, default=60.0,
                         help="seconds to keep retrying the connection to the trainer (default 60)")
+    parser.add_argument("--spin-wait-ms", type=float, default=0.0, metavar="MS",
+                        help="poll for the trainer's answer up to MS ms past when it is due instead of "
+                             "sleeping through it (saves the wake-up on a machine with a CPU to spare; "
+                             "mlagents-like-learn passes it when it does; default 0 = always sleep)")
     parser.add_argument("--list", action="store_true", help="list the tasks with their specs and exit")
     parser.add_argument("--write-launcher", metavar="DIR", default=None,
                         help="write DIR/Stub<Task>.x86_64, a Unity-build-like launcher of --task that "
@@ -90,8 +94,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unity-stub-env: each --task may appear once (got {', '.join(args.tasks)}): two copies "
               "would share one behavior name; use --num-areas for more agents.", file=sys.stderr)
         return 2
+    if not args.spin_wait_ms >= 0:
+        print(f"unity-stub-env: --spin-wait-ms must be 0 or more, got {args.spin_wait_ms:g}.", file=sys.stderr)
+        return 2
     if args.write_launcher is not None:
-        path = write_player_launcher(args.write_launcher, args.tasks)
+        extra = ["--spin-wait-ms", f"{args.spin_wait_ms:g}"] if args.spin_wait_ms else []
+        path = write_player_launcher(args.write_launcher, args.tasks, extra_args=extra)
         print(f"{path}  (use --env {path.with_suffix('')})")
         return 0
     if args.mlagents_port is None:
@@ -101,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     _configure_logging(args.log_file)
     if unknown:
         logger.info("Ignoring unknown flags: %s", " ".join(unknown))
-    communicator = RpcCommunicator(args.mlagents_port, args.connect_timeout)
+    communicator = RpcCommunicator(args.mlagents_port, args.connect_timeout, args.spin_wait_ms / 1e3)
     signal.signal(signal.SIGTERM, communicator.request_stop)
     signal.signal(signal.SIGINT, communicator.request_stop)
     try:

@@ -109,11 +109,11 @@ class _GrpcioChannel:
         self._channel.close()
 
 
-def _open_channel(port: int):
+def _open_channel(port: int, spin_s: float = 0.0):
     """The stub's gRPC client: our blocking HTTP/2 one (no threads; default) or grpcio's."""
     if os.environ.get("MLAGENTS_LIKE_TRANSPORT", "").strip().lower() == "grpcio":
         return _GrpcioChannel("localhost", port)
-    return Http2Channel("localhost", port, EXCHANGE_PATH.encode())
+    return Http2Channel("localhost", port, EXCHANGE_PATH.encode(), spin_s)
 
 
 class _AbortExchange(BaseException):
@@ -127,10 +127,11 @@ def _abort_exchange(*_args) -> None:
 class RpcCommunicator:
     """One connection to a trainer at ``localhost:port``; Unity is the caller of every RPC."""
 
-    def __init__(self, port: int, connect_timeout: float = 60.0) -> None:
+    def __init__(self, port: int, connect_timeout: float = 60.0, spin_wait: float = 0.0) -> None:
         self.address = f"localhost:{port}"
         self.port = port
         self.connect_timeout = float(connect_timeout)
+        self.spin_wait = float(spin_wait)  # s; see trainer/protocol/pacing.py
         self.stop_requested = False
         self._channel = None
         self._sent_brain_keys: set[str] = set()
@@ -146,7 +147,7 @@ class RpcCommunicator:
     # Connection and handshake ---------------------------------------------------------------
     def connect(self) -> None:
         """Open the channel, retrying until ``connect_timeout``; SessionEnd(exit 1) if it fails."""
-        self._channel = _open_channel(self.port)
+        self._channel = _open_channel(self.port, self.spin_wait)
         deadline = time.monotonic() + self.connect_timeout
         while True:
             started = time.monotonic()
@@ -243,6 +244,10 @@ class RpcCommunicator:
 
     def _close_channel(self) -> None:
         if self._channel is not None:
+            pace = getattr(self._channel, "pace", None)
+            if pace is not None and pace.spin_s > 0:
+                logger.info("--spin-wait-ms %g: %d of %d answers were found by polling, not by a wake-up",
+                            pace.spin_s * 1e3, pace.caught_polling, pace.arrivals)
             self._channel.close()
             self._channel = None
 

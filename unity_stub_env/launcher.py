@@ -19,12 +19,14 @@ def player_name(tasks: list[str]) -> str:
     return "Stub" + "".join("".join(ch for ch in task.title() if ch.isalnum()) for task in tasks)
 
 
-def write_player_launcher(folder: str | Path, tasks: list[str], python: str | None = None) -> Path:
-    """Write ``folder/<player_name>.x86_64`` (executable) and return its path."""
+def write_player_launcher(folder: str | Path, tasks: list[str], python: str | None = None,
+                          extra_args: list[str] | None = None) -> Path:
+    """Write ``folder/<player_name>.x86_64`` (executable) and return its path; ``extra_args``
+    (stub flags such as ``--spin-wait-ms 1``) come before the launching tool's arguments."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{player_name(tasks)}.x86_64"
-    command = [python or sys.executable, "-m", "unity_stub_env.cli", "--task", ",".join(tasks)]
+    command = [python or sys.executable, "-m", "unity_stub_env.cli", "--task", ",".join(tasks), *(extra_args or [])]
     path.write_text("#!/bin/sh\nexec " + " ".join(shlex.quote(part) for part in command) + ' "$@"\n')
     path.chmod(path.stat().st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)
     return path

@@ -106,6 +106,14 @@ def test_cli_list_and_usage_errors(capsys):
     assert "nope" in capsys.readouterr().err
     assert main(["--task", "basic", "--task", "basic", "--mlagents-port", "5005"]) == 2
     assert "each --task may appear once" in capsys.readouterr().err
+    assert main(["--task", "basic", "--mlagents-port", "5005", "--spin-wait-ms", "-1"]) == 2
+    assert "--spin-wait-ms must be 0 or more, got -1" in capsys.readouterr().err
+
+
+def test_written_launcher_keeps_the_spin_wait(tmp_path, capsys):
+    assert main(["--task", "ball3d", "--spin-wait-ms", "1.5", "--write-launcher", str(tmp_path)]) == 0
+    script = (tmp_path / "StubBall3D.x86_64").read_text()
+    assert "--task ball3d --spin-wait-ms 1.5 \"$@\"" in script
 
 
 def test_no_trainer_exits_1_naming_the_address_and_logs_to_the_log_file(tmp_path):

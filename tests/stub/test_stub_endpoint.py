@@ -76,3 +76,32 @@ def test_many_agents_are_decoded_from_bytes_once_and_equal_a_full_parse(endpoint
     assert terminals > 0  # including messages that mix terminal infos with decision requests
     endpoint.close()
     assert process.wait(timeout=10) == 0
+
+
+def test_polling_on_both_ends_changes_nothing_but_the_waiting(launch, tmp_path):
+    """The endpoint and the stub both poll for each other's answers (--spin-wait-ms,
+    trainer/protocol/pacing.py): the steps are the same as with plain blocking, the waits are
+    timed, and the stub reports at exit how many answers polling found."""
+    actions = [np.array([[a], [2 - a]], np.int32) for a in (2, 2, 1, 0, 2, 2, 2, 2, 0, 1) * 3]
+    runs = []
+    for spin in (0.0, 0.002):
+        log = tmp_path / f"Player-{spin}.log"
+        with UnityEndpoint(0, timeout_wait=20, spin_wait=spin) as server:
+            server.start()
+            process = launch(server.port, "basic", "--num-areas", "2", "--spin-wait-ms", f"{spin * 1e3:g}",
+                             "-logFile", str(log))
+            server.handshake(seed=3, num_areas=2)
+            result, seen = server.reset(b""), []
+            for discrete in actions:
+                result = server.step({"Basic?team=0": ActionTuple(np.zeros((2, 0), np.float32), discrete)})
+                decision, terminal = result.steps["Basic?team=0"]
+                seen.append((decision.obs[0].tolist(), decision.agent_id.tolist(), terminal.reward.tolist()))
+            pace = server._transport.pace
+            assert pace.spin_s == spin and pace.arrivals >= 1  # the trainer timed the stub's answers
+            server.close()
+            assert process.wait(timeout=10) == 0
+        runs.append(seen)
+        polling_line = [line for line in log.read_text().splitlines() if "found by polling" in line]
+        assert len(polling_line) == (1 if spin else 0)
+    assert runs[0] == runs[1]
+    assert any(reward for _, _, reward in runs[0])  # episodes ended on the way

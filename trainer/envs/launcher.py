@@ -114,17 +114,21 @@ def build_launch_command(
     env_args: list[str] | None = None,
     seed: int | None = None,
     num_areas: int = 1,
+    stub_spin_wait: float = 0.0,
 ) -> list[str]:
     """The argv for worker ``worker_id``, in the order of spec §1.2.
 
     ``env_path`` is a resolved executable path or ``stub:TASK``. ``seed`` and ``num_areas`` are
     not command-line arguments (they travel in the initialization message); they are accepted so
     one set of env settings can be passed through, and ``num_areas`` is checked here.
+    ``stub_spin_wait`` (s) is passed to the stub as ``--spin-wait-ms`` (never to a Unity build).
     """
     if num_areas < 1:
         raise ConfigError(f"--num-areas must be at least 1, got {num_areas}.")
     if is_stub_env(env_path):
         command = [sys.executable, "-m", "unity_stub_env.cli", "--task", env_path[len(STUB_PREFIX):]]
+        if stub_spin_wait > 0:
+            command += ["--spin-wait-ms", f"{stub_spin_wait * 1e3:g}"]
     else:
         command = [env_path]
     extra = list(env_args or [])

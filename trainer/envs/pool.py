@@ -18,6 +18,7 @@ from typing import Callable
 
 from trainer.envs.launcher import RestartPolicy, SimulatorProcess, build_launch_command, resolve_env_path
 from trainer.errors import SimulatorExitedError, UnityTimeOutError, UserError
+from trainer.protocol.pacing import spin_budget
 from trainer.protocol.server import UnityEndpoint
 from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
 
@@ -52,10 +53,11 @@ class PoolStep:
 
 
 class _Worker:
-    def __init__(self, worker_id: int, settings: PoolSettings, env_path: str | None):
+    def __init__(self, worker_id: int, settings: PoolSettings, env_path: str | None, spin_wait: float = 0.0):
         self.worker_id = worker_id
         self.settings = settings
         self.env_path = env_path
+        self.spin_wait = spin_wait  # s, both ends of the exchange (trainer/protocol/pacing.py)
         self.port = settings.base_port + worker_id if env_path else DEFAULT_EDITOR_PORT
         self.process: SimulatorProcess | None = None
         self.endpoint: UnityEndpoint | None = None
@@ -70,13 +72,13 @@ class _Worker:
         if self.env_path:
             cmd = build_launch_command(
                 self.env_path, self.worker_id, s.base_port, s.no_graphics, s.no_graphics_monitor,
-                s.log_folder, list(s.env_args), s.seed + self.worker_id, s.num_areas,
+                s.log_folder, list(s.env_args), s.seed + self.worker_id, s.num_areas, self.spin_wait,
             )
             self.process = SimulatorProcess(cmd, self.worker_id, log_folder=s.log_folder, debug=s.debug)
         is_alive = self.process.is_alive if self.process else None
         describe = self.process.describe() if self.process else "the Unity Editor"
         self.endpoint = UnityEndpoint(self.port, bind=s.bind, timeout_wait=s.timeout_wait,
-                                      is_alive=is_alive, describe=describe)
+                                      is_alive=is_alive, describe=describe, spin_wait=self.spin_wait)
         self.endpoint.start()  # bind before launching, so the simulator finds us listening
         if self.process:
             self.process.start()
@@ -107,7 +109,9 @@ class EnvPool:
             raise UserError("--num-envs > 1 needs --env: the Unity Editor is a single environment.")
         env_path = resolve_env_path(settings.env_path) if settings.env_path else None
         self.settings = settings
-        self.workers = [_Worker(i, settings, env_path) for i in range(settings.num_envs)]
+        # waiting sides poll instead of sleeping only if the trainer and every simulator have a CPU
+        spin_wait = spin_budget(settings.num_envs + 1)
+        self.workers = [_Worker(i, settings, env_path, spin_wait) for i in range(settings.num_envs)]
         self._initial_side_channel = initial_side_channel
         self._restarts = RestartPolicy(settings.max_lifetime_restarts, settings.restarts_rate_limit_n,
                                        settings.restarts_rate_limit_period_s)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import select
 import selectors
 import socket
 import struct
@@ -30,6 +31,8 @@ import time
 from urllib.parse import quote
 
 import hpack
+
+from trainer.protocol.pacing import PacedWait
 
 logger = logging.getLogger(__name__)
 
@@ -437,6 +440,7 @@ class _Connection:
         self.out += frame(HEADERS, END_HEADERS | END_STREAM, stream_id, TRAILERS_OK)
         self.streams.pop(stream_id, None)
         self.flush()
+        self.transport.pace.sent()
 
     def send_error(self, stream_id: int, status: int, message: str, flush: bool = True) -> None:
         """A trailers-only response: HTTP 200 with the gRPC status, ending the stream."""
@@ -538,11 +542,12 @@ def _peer_name(sock: socket.socket) -> str:
 class Http2Transport:
     """Listens on ``bind:port`` and hands out complete unary calls of ``path``."""
 
-    def __init__(self, bind: str, port: int, path: bytes, max_message_bytes: int) -> None:
+    def __init__(self, bind: str, port: int, path: bytes, max_message_bytes: int, spin_s: float = 0.0) -> None:
         self.bind = bind
         self.port = port
         self.path = path
         self.max_message_bytes = max_message_bytes
+        self.pace = PacedWait(spin_s)  # when the simulator's next call is due (pacing.py)
         self.client_gone = False
         self.closed = False
         self._listener: socket.socket | None = None
@@ -602,14 +607,44 @@ class Http2Transport:
     def take(self, timeout: float) -> IncomingCall | None:
         """The next complete call, waiting up to ``timeout`` s; None on timeout, once a pending
         call was dropped by the client, or after ``close``."""
-        deadline = time.monotonic() + timeout
-        while not self._ready:
-            if self.closed or self.client_gone:
-                return None
-            remaining = deadline - time.monotonic()
-            if not self._pump(max(remaining, 0.0)) and remaining <= 0:
-                return None
-        return self._ready.popleft()
+        if self.closed:
+            return None
+        if not self._ready and not self.client_gone:
+            self._pump(0.0)
+            if self._ready:  # it was there before we looked: nothing to learn about its timing
+                self.pace.forget()
+        if not self._ready and timeout > 0:
+            deadline = time.monotonic() + timeout
+            polled = self._paced_wait(timeout)
+            while not self._ready:
+                if self.closed or self.client_gone:
+                    return None
+                remaining = deadline - time.monotonic()
+                if not self._pump(max(remaining, 0.0)) and remaining <= 0:
+                    return None
+            self.pace.arrived(polled)
+        return self._ready.popleft() if self._ready else None
+
+    def _paced_wait(self, timeout: float) -> bool:
+        """Block until shortly before the simulator's call is due, then poll without sleeping
+        through the expected moment (pacing.py). True if polling completed a call."""
+        window = self.pace.window()
+        if window is None:
+            return False
+        block_until, poll_until = window
+        now = time.perf_counter()
+        end = now + timeout
+        if block_until > now and self._connections:
+            # select: microsecond timeouts (epoll rounds up to whole milliseconds)
+            readable, _, _ = select.select(list(self._connections), [], [], min(block_until, end) - now)
+            if readable:
+                self._pump(0.0)
+                if self._ready:
+                    return False
+        poll_until = min(poll_until, end)
+        while not self._ready and not self.closed and not self.client_gone and time.perf_counter() < poll_until:
+            self._pump(0.0)
+        return bool(self._ready)
 
     def _accept(self) -> None:
         try:
@@ -671,8 +706,9 @@ class Http2Channel:
     answer, flow control and PING/SETTINGS handled while waiting), ``close``.
     """
 
-    def __init__(self, host: str, port: int, path: bytes) -> None:
+    def __init__(self, host: str, port: int, path: bytes, spin_s: float = 0.0) -> None:
         self.host, self.port, self.path = host, port, path
+        self.pace = PacedWait(spin_s)  # when the trainer's answer is due (pacing.py)
         self._headers = request_headers(path, f"{host}:{port}".encode())
         self.sock: socket.socket | None = None
         self._decoder = CachingDecoder()
@@ -727,8 +763,9 @@ class Http2Channel:
                 self._stream_window -= allowed
                 offset = end
             self._send(bytes(out))
+            self.pace.sent()
             response: dict = {"data": bytearray(), "status": None, "message": "", "http": None}
-            self._read_frames(stream_id, response)
+            self._read_frames(stream_id, response, self._paced_wait())
         except socket.timeout:
             self.close()
             raise CallError("DEADLINE_EXCEEDED", "no answer in time") from None
@@ -751,17 +788,37 @@ class Http2Channel:
             raise CallError("INTERNAL", "the answer is not one uncompressed gRPC message")
         return bytes(data[5:])
 
-    def _read_frames(self, stream_id: int, response: dict | None) -> None:
+    def _read_frames(self, stream_id: int, response: dict | None, polled: bool = False) -> None:
         """Read and handle frames until ``response``'s stream ends (or, with None, until one
-        read's worth of frames is handled: used to wait for WINDOW_UPDATE)."""
+        read's worth of frames is handled: used to wait for WINDOW_UPDATE). ``polled``: the
+        answer's first bytes were found by polling (``_paced_wait``)."""
         while True:
             data = self.sock.recv(_RECV_BYTES)
             if not data:
                 raise OSError("the server closed the connection")
+            if response is not None:
+                self.pace.arrived(polled)
             self._buffer += data
             ended = self._parse(stream_id, response)
             if ended or response is None:
                 return
+
+    def _paced_wait(self) -> bool:
+        """Block until shortly before the answer is due, then poll without sleeping through
+        the expected moment (pacing.py); the blocking read that follows finds the bytes there.
+        True if polling found them."""
+        window = self.pace.window()
+        if window is None:
+            return False
+        block_until, poll_until = window
+        sock = [self.sock]
+        now = time.perf_counter()
+        if block_until > now and select.select(sock, [], [], block_until - now)[0]:
+            return False
+        while time.perf_counter() < poll_until:
+            if select.select(sock, [], [], 0.0)[0]:
+                return True
+        return False
 
     def _parse(self, stream_id: int, response: dict | None) -> bool:
         ended, out = False, bytearray()

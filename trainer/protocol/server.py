@@ -221,12 +221,16 @@ class UnityEndpoint:
         is_alive: Callable[[], bool] | None = None,
         describe: str = "",
         transport: str | None = None,
+        spin_wait: float = 0.0,
     ) -> None:
+        """``spin_wait`` (s): poll for the simulator's next call up to this long past when it is
+        due instead of sleeping through it (trainer/protocol/pacing.py; HTTP/2 transport only)."""
         self.port = port
         self.bind = bind
         self.timeout_wait = float(timeout_wait)
         self.is_alive = is_alive
         self.describe = describe
+        self.spin_wait = float(spin_wait)
         self.behavior_specs: dict[str, BehaviorSpec] = {}
         self.init_output = None  # UnityRLInitializationOutputProto from M1
         self.transport_name = transport or default_transport()
@@ -246,7 +250,7 @@ class UnityEndpoint:
         if self.transport_name == "grpcio":
             transport = _GrpcioTransport(self.bind, self.port, MAX_MESSAGE_BYTES)
         else:
-            transport = Http2Transport(self.bind, self.port, EXCHANGE_PATH, MAX_MESSAGE_BYTES)
+            transport = Http2Transport(self.bind, self.port, EXCHANGE_PATH, MAX_MESSAGE_BYTES, self.spin_wait)
         try:
             transport.start()
         except OSError:

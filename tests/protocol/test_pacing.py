@@ -1,0 +1,108 @@
+"""PacedWait (trainer/protocol/pacing.py): when a waiter blocks and when it polls, by hand."""
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from trainer.protocol import pacing
+from trainer.protocol.pacing import LEAD_S, PacedWait, spin_budget
+
+
+@pytest.fixture
+def clock(monkeypatch):
+    """A settable perf_counter for pacing.py."""
+    now = [0.0]
+    monkeypatch.setattr(pacing.time, "perf_counter", lambda: now[0])
+    return now
+
+
+def exchange(pace: PacedWait, clock, sent_at: float, took: float) -> None:
+    clock[0] = sent_at
+    pace.sent()
+    clock[0] = sent_at + took
+    pace.arrived()
+
+
+def test_no_window_without_spin_history_or_a_message_out(clock):
+    assert LEAD_S == 0.5e-3
+    off = PacedWait(0.0)
+    exchange(off, clock, 1.0, 0.002)
+    off.sent()
+    assert off.window() is None  # spin 0: plain blocking
+    on = PacedWait(0.001)
+    on.sent()
+    assert on.window() is None  # nothing learnt yet
+    on.arrived()
+    assert on.window() is None  # nothing out
+
+
+def test_window_brackets_the_earliest_recent_answer(clock):
+    pace = PacedWait(0.001)
+    exchange(pace, clock, 10.0, 0.0020)
+    exchange(pace, clock, 20.0, 0.0015)
+    exchange(pace, clock, 30.0, 0.0030)
+    clock[0] = 40.0
+    pace.sent()
+    block_until, poll_until = pace.window()
+    # due = 40 + 1.5 ms; block until 0.5 ms before, poll until 1 ms after
+    assert block_until == pytest.approx(40.0010)
+    assert poll_until == pytest.approx(40.0025)
+    assert (pace.arrivals, pace.caught_polling) == (3, 0)
+
+
+def test_history_keeps_the_last_16_answers(clock):
+    pace = PacedWait(0.002)
+    exchange(pace, clock, 1.0, 0.0001)  # one fast answer long ago
+    for i in range(16):
+        exchange(pace, clock, 2.0 + i, 0.004)
+    clock[0] = 100.0
+    pace.sent()
+    assert pace.window() == pytest.approx((100.0035, 100.006))
+
+
+def test_an_answer_there_before_we_looked_teaches_nothing(clock):
+    pace = PacedWait(0.001)
+    exchange(pace, clock, 1.0, 0.002)
+    clock[0] = 2.0
+    pace.sent()
+    pace.forget()  # it was already waiting: its arrival time is unknown
+    assert pace.window() is None
+    clock[0] = 9.0
+    pace.arrived(polling=True)  # without a message out: ignored
+    assert (pace.arrivals, pace.caught_polling) == (1, 0)
+    exchange(pace, clock, 10.0, 0.003)
+    clock[0] = 20.0
+    pace.sent()
+    assert pace.window() == pytest.approx((20.0015, 20.003))  # min(2 ms, 3 ms)
+
+
+def test_polling_arrivals_are_counted(clock):
+    pace = PacedWait(0.001)
+    for i, polled in enumerate([False, True, True, False, True]):
+        clock[0] = float(i)
+        pace.sent()
+        clock[0] += 0.001
+        pace.arrived(polling=polled)
+    assert (pace.arrivals, pace.caught_polling) == (5, 3)
+
+
+def test_negative_spin_is_off():
+    assert PacedWait(-1.0).spin_s == 0.0
+
+
+@pytest.mark.parametrize("cpus, processes, expected", [
+    (2, 2, 0.001),  # trainer + one simulator on two CPUs: poll
+    (2, 3, 0.0),    # two simulators + trainer on two CPUs: polling would steal a CPU
+    (1, 2, 0.0),
+    (16, 9, 0.001),
+])
+def test_spin_budget_needs_a_cpu_per_process(monkeypatch, cpus, processes, expected):
+    monkeypatch.setattr(pacing, "usable_cpus", lambda: cpus)
+    assert spin_budget(processes) == expected
+
+
+def test_usable_cpus_is_the_affinity_mask():
+    if not hasattr(os, "sched_getaffinity"):
+        pytest.skip("no affinity masks on this OS")
+    assert pacing.usable_cpus() == len(os.sched_getaffinity(0))
