@@ -32,7 +32,7 @@ from urllib.parse import quote
 
 import hpack
 
-from trainer.protocol.pacing import PacedWait
+from trainer.protocol.pacing import PacedWait, yield_cpu
 
 logger = logging.getLogger(__name__)
 
@@ -643,6 +643,7 @@ class Http2Transport:
                     return False
         poll_until = min(poll_until, end)
         while not self._ready and not self.closed and not self.client_gone and time.perf_counter() < poll_until:
+            yield_cpu()  # a process that shares this CPU goes first (pacing.py)
             self._pump(0.0)
         return bool(self._ready)
 
@@ -816,6 +817,7 @@ class Http2Channel:
         if block_until > now and select.select(sock, [], [], block_until - now)[0]:
             return False
         while time.perf_counter() < poll_until:
+            yield_cpu()  # a process that shares this CPU goes first (pacing.py)
             if select.select(sock, [], [], 0.0)[0]:
                 return True
         return False

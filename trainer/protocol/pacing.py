@@ -12,6 +12,12 @@ then polls the socket without sleeping for at most ``spin_s`` past it, then bloc
 CPU spent polling is bounded per exchange by ``LEAD_S + spin_s``; ``spin_s = 0`` turns pacing
 off (plain blocking). Only worth it when every process of the run has a CPU of its own, which is
 what ``spin_budget`` decides.
+
+Every poll yields the CPU first (``os.sched_yield``). A socket write wakes the reader as a
+"sync" wake-up (the kernel assumes the writer is about to sleep) and so tends to put it on the
+writer's CPU; a writer that polls instead of sleeping then shares that CPU with the process it
+waits for. Measured on ball3d x12 without the yield: 3.8 -> 6.0 ms per exchange, the stub's
+physics 1.9 -> 2.7 ms, 15 % of answers found by polling; with it: 3.1 -> 2.6 ms, 95 %.
 """
 from __future__ import annotations
 
@@ -22,6 +28,8 @@ import time
 LEAD_S = 0.5e-3  # stop blocking this long before the earliest expected answer
 DEFAULT_SPIN_S = 1.0e-3  # then poll for at most this long past it
 _HISTORY = 16
+# give the CPU to whatever else is runnable on it, before every poll (see above)
+yield_cpu = getattr(os, "sched_yield", lambda: None)
 
 
 def usable_cpus() -> int:
