@@ -54,6 +54,23 @@ MAX_WINDOW = (1 << 31) - 1
 DEFAULT_WINDOW = 65535
 OUR_MAX_FRAME = (1 << 24) - 1  # the largest allowed: big observations arrive in few frames
 _RECV_BYTES = 1 << 20
+
+
+class _ReadBuffer:
+    """One preallocated receive buffer: ``recv(1 MiB)`` allocates (and maps) a fresh 1 MiB
+    object on every call, which cost 13-32 us for a 14 KB message here; ``recv_into`` this
+    buffer then appending the bytes read costs ~6 us."""
+
+    __slots__ = ("_view",)
+
+    def __init__(self) -> None:
+        self._view = memoryview(bytearray(_RECV_BYTES))
+
+    def read_into(self, sock: socket.socket, target: bytearray) -> int:
+        """Append what one ``recv`` returns to ``target``; the byte count (0: closed)."""
+        count = sock.recv_into(self._view)
+        target += self._view[:count]
+        return count
 MAX_HEADER_BLOCK = 1 << 20  # a gRPC request's headers are a few hundred bytes
 _SEND_TIMEOUT_S = 30.0
 
@@ -196,6 +213,7 @@ class _Connection:
         self.transport = transport
         self.peer = _peer_name(sock)
         self.buffer = bytearray()
+        self._reader = _ReadBuffer()
         self.preface_seen = False
         self.decoder = CachingDecoder()
         self.streams: dict[int, _Stream] = {}
@@ -225,13 +243,12 @@ class _Connection:
     def read_available(self) -> list[IncomingCall]:
         """Read what the socket has (it is readable) and return the calls it completed."""
         try:
-            data = self.sock.recv(_RECV_BYTES)
+            received = self._reader.read_into(self.sock, self.buffer)
         except (ConnectionError, OSError):
-            data = b""
-        if not data:
+            received = 0
+        if not received:
             self.drop("the connection was closed")
             return []
-        self.buffer += data
         calls: list[IncomingCall] = []
         try:
             self._parse(calls)
@@ -714,6 +731,7 @@ class Http2Channel:
         self.sock: socket.socket | None = None
         self._decoder = CachingDecoder()
         self._buffer = bytearray()
+        self._reader = _ReadBuffer()
         self._next_stream = 1
         self._send_window = DEFAULT_WINDOW
         self._peer_initial_window = DEFAULT_WINDOW
@@ -794,12 +812,10 @@ class Http2Channel:
         read's worth of frames is handled: used to wait for WINDOW_UPDATE). ``polled``: the
         answer's first bytes were found by polling (``_paced_wait``)."""
         while True:
-            data = self.sock.recv(_RECV_BYTES)
-            if not data:
+            if not self._reader.read_into(self.sock, self._buffer):
                 raise OSError("the server closed the connection")
             if response is not None:
                 self.pace.arrived(polled)
-            self._buffer += data
             ended = self._parse(stream_id, response)
             if ended or response is None:
                 return
