@@ -6,7 +6,7 @@ import os
 import pytest
 
 from trainer.protocol import pacing
-from trainer.protocol.pacing import LEAD_S, PacedWait, spin_budget
+from trainer.protocol.pacing import LEAD_S, PacedWait, spin_budget, wait_paced
 
 
 @pytest.fixture
@@ -106,3 +106,44 @@ def test_usable_cpus_is_the_affinity_mask():
     if not hasattr(os, "sched_getaffinity"):
         pytest.skip("no affinity masks on this OS")
     assert pacing.usable_cpus() == len(os.sched_getaffinity(0))
+
+
+# --- wait_paced: the waiting itself, on a real socket pair ----------------------------------
+
+def primed(spin_s: float, took: float) -> PacedWait:
+    """A PacedWait that has seen one answer take ``took`` s and has just sent again."""
+    pace = PacedWait(spin_s)
+    pace._recent.append(took)
+    pace.sent()
+    return pace
+
+
+def test_wait_paced_without_a_window_does_not_wait_or_look():
+    calls = []
+    assert wait_paced(PacedWait(0.0), [], lambda: calls.append(1) or True) is False
+    assert calls == []
+
+
+def test_wait_paced_polls_until_ready_inside_the_window():
+    pace = primed(spin_s=10.0, took=0.0)  # due now: no block, poll for up to 10 s
+    answers = iter([False, False, True])
+    calls = []
+    assert wait_paced(pace, [], lambda: calls.append(1) or next(answers)) is True
+    assert len(calls) == 3
+
+
+def test_wait_paced_gives_up_when_the_window_closes():
+    pace = primed(spin_s=0.002, took=0.0)
+    calls = []
+    assert wait_paced(pace, [], lambda: calls.append(1) or False) is False
+    assert len(calls) >= 1
+
+
+def test_wait_paced_returns_from_the_block_when_the_answer_is_already_readable():
+    import socket
+
+    a, b = socket.socketpair()
+    with a, b:
+        a.sendall(b"x")
+        pace = primed(spin_s=0.001, took=60.0)  # due in a minute: it would block until then
+        assert wait_paced(pace, [b], lambda: True) is False  # found by the block, not by polling

@@ -32,7 +32,7 @@ from urllib.parse import quote
 
 import hpack
 
-from trainer.protocol.pacing import PacedWait, yield_cpu
+from trainer.protocol.pacing import PacedWait, wait_paced
 
 logger = logging.getLogger(__name__)
 
@@ -632,7 +632,7 @@ class Http2Transport:
                 self.pace.forget()
         if not self._ready and timeout > 0:
             deadline = time.monotonic() + timeout
-            polled = self._paced_wait(timeout)
+            polled = wait_paced(self.pace, list(self._connections), self._call_ready, timeout)
             while not self._ready:
                 if self.closed or self.client_gone:
                     return None
@@ -642,26 +642,11 @@ class Http2Transport:
             self.pace.arrived(polled)
         return self._ready.popleft() if self._ready else None
 
-    def _paced_wait(self, timeout: float) -> bool:
-        """Block until shortly before the simulator's call is due, then poll without sleeping
-        through the expected moment (pacing.py). True if polling completed a call."""
-        window = self.pace.window()
-        if window is None:
-            return False
-        block_until, poll_until = window
-        now = time.perf_counter()
-        end = now + timeout
-        if block_until > now and self._connections:
-            # select: microsecond timeouts (epoll rounds up to whole milliseconds)
-            readable, _, _ = select.select(list(self._connections), [], [], min(block_until, end) - now)
-            if readable:
-                self._pump(0.0)
-                if self._ready:
-                    return False
-        poll_until = min(poll_until, end)
-        while not self._ready and not self.closed and not self.client_gone and time.perf_counter() < poll_until:
-            yield_cpu()  # a process that shares this CPU goes first (pacing.py)
-            self._pump(0.0)
+    def _call_ready(self) -> bool:
+        """Read what the sockets hold; True once a call is complete (or waiting is pointless)."""
+        if self.closed or self.client_gone:
+            return True
+        self._pump(0.0)
         return bool(self._ready)
 
     def _accept(self) -> None:
@@ -784,7 +769,9 @@ class Http2Channel:
             self._send(bytes(out))
             self.pace.sent()
             response: dict = {"data": bytearray(), "status": None, "message": "", "http": None}
-            self._read_frames(stream_id, response, self._paced_wait())
+            sock = [self.sock]
+            polled = wait_paced(self.pace, sock, lambda: bool(select.select(sock, [], [], 0.0)[0]))
+            self._read_frames(stream_id, response, polled)
         except socket.timeout:
             self.close()
             raise CallError("DEADLINE_EXCEEDED", "no answer in time") from None
@@ -810,7 +797,7 @@ class Http2Channel:
     def _read_frames(self, stream_id: int, response: dict | None, polled: bool = False) -> None:
         """Read and handle frames until ``response``'s stream ends (or, with None, until one
         read's worth of frames is handled: used to wait for WINDOW_UPDATE). ``polled``: the
-        answer's first bytes were found by polling (``_paced_wait``)."""
+        answer's first bytes were found by polling (``pacing.wait_paced``)."""
         while True:
             if not self._reader.read_into(self.sock, self._buffer):
                 raise OSError("the server closed the connection")
@@ -819,24 +806,6 @@ class Http2Channel:
             ended = self._parse(stream_id, response)
             if ended or response is None:
                 return
-
-    def _paced_wait(self) -> bool:
-        """Block until shortly before the answer is due, then poll without sleeping through
-        the expected moment (pacing.py); the blocking read that follows finds the bytes there.
-        True if polling found them."""
-        window = self.pace.window()
-        if window is None:
-            return False
-        block_until, poll_until = window
-        sock = [self.sock]
-        now = time.perf_counter()
-        if block_until > now and select.select(sock, [], [], block_until - now)[0]:
-            return False
-        while time.perf_counter() < poll_until:
-            yield_cpu()  # a process that shares this CPU goes first (pacing.py)
-            if select.select(sock, [], [], 0.0)[0]:
-                return True
-        return False
 
     def _parse(self, stream_id: int, response: dict | None) -> bool:
         ended, out = False, bytearray()
