@@ -123,6 +123,15 @@ def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
     assert "Traceback" not in r.stderr and "Traceback" not in r.stdout
 
 
+def test_bad_spin_wait_setting_is_refused_before_anything_is_written(tmp_path, basic_config, env_no_proxy):
+    env = dict(env_no_proxy, MLAGENTS_LIKE_SPIN_WAIT_MS="fast")
+    r = learn([str(basic_config()), "--env", "stub:basic", "--results-dir", str(tmp_path / "res")],
+              cwd=tmp_path, timeout=60, env=env)
+    assert r.returncode == 2
+    assert "MLAGENTS_LIKE_SPIN_WAIT_MS='fast'" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "res").exists()
+
+
 def test_port_in_use_is_a_clear_error(tmp_path, basic_config, env_no_proxy):
     with socket.socket() as blocker:
         blocker.bind(("127.0.0.1", 0))

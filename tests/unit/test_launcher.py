@@ -152,6 +152,7 @@ def test_pool_polls_only_with_a_cpu_for_the_trainer_and_each_simulator(monkeypat
     from trainer.protocol import pacing
 
     monkeypatch.setattr(pacing, "usable_cpus", lambda: cpus)
+    monkeypatch.delenv(pacing.SPIN_WAIT_ENV, raising=False)
     settings = PoolSettings(env_path="stub:basic", env_args=(), base_port=5005, num_envs=2, num_areas=1,
                             seed=0, timeout_wait=5, bind="127.0.0.1", no_graphics=True,
                             no_graphics_monitor=False, log_folder=None)
