@@ -54,6 +54,8 @@ MAX_WINDOW = (1 << 31) - 1
 DEFAULT_WINDOW = 65535
 OUR_MAX_FRAME = (1 << 24) - 1  # the largest allowed: big observations arrive in few frames
 _RECV_BYTES = 1 << 20
+MAX_HEADER_BLOCK = 1 << 20  # a gRPC request's headers are a few hundred bytes
+_SEND_TIMEOUT_S = 30.0
 
 
 class _ReadBuffer:
@@ -71,8 +73,6 @@ class _ReadBuffer:
         count = sock.recv_into(self._view)
         target += self._view[:count]
         return count
-MAX_HEADER_BLOCK = 1 << 20  # a gRPC request's headers are a few hundred bytes
-_SEND_TIMEOUT_S = 30.0
 
 
 class Http2Error(Exception):

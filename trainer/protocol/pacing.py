@@ -3,7 +3,7 @@
 A process that blocks in ``select``/``recv`` gives its CPU away; when the peer's bytes arrive,
 the kernel (and on a virtual machine the hypervisor) has to wake it first. On the 2-vCPU
 development VM that hand-off costs 0.1-0.2 ms, twice per exchange (trainer -> simulator and
-back), which is more than the trainer's whole decode of a 12-agent step.
+back): together about as long as the trainer's whole decode of a 12-agent step.
 
 Both ends of an exchange answer at a steady pace (one simulator step, one trainer decision), so
 the waiter can predict when the answer comes: ``PacedWait`` remembers how long the last answers
