@@ -38,7 +38,7 @@ sys.path.insert(0, str(REPO))
 from trainer.protocol.server import UnityEndpoint  # noqa: E402
 from unity_stub_env.launcher import write_player_launcher
 from unity_stub_env import make_task  # noqa: E402
-from trainer.protocol.pacing import spin_budget  # noqa: E402
+from trainer.protocol.pacing import spin_budget, stub_args  # noqa: E402
 
 INTEROP_PYTHON = REPO / ".venv-interop" / "bin" / "python"
 PEER = Path(__file__).resolve().parent / "peers" / "mlagents_envs_rollout.py"
@@ -47,7 +47,7 @@ AGENTS_PER_AREA = {"basic": 1, "ball3d": 12}
 # as mlagents-like-learn decides for one simulator; the stub gets the same flag under
 # mlagents_envs (ii), so both trainers face the same simulator
 SPIN_WAIT = spin_budget(2)
-STUB_FLAGS = ["--spin-wait-ms", f"{SPIN_WAIT * 1e3:g}"] if SPIN_WAIT else []
+STUB_FLAGS = stub_args(SPIN_WAIT)
 
 
 def free_port() -> int:

@@ -17,6 +17,7 @@ import resource
 import signal
 import sys
 
+from trainer.protocol.pacing import stub_args
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter, build_brain_parameters
 from unity_stub_env.launcher import write_player_launcher
@@ -98,8 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unity-stub-env: --spin-wait-ms must be 0 or more, got {args.spin_wait_ms:g}.", file=sys.stderr)
         return 2
     if args.write_launcher is not None:
-        extra = ["--spin-wait-ms", f"{args.spin_wait_ms:g}"] if args.spin_wait_ms else []
-        path = write_player_launcher(args.write_launcher, args.tasks, extra_args=extra)
+        path = write_player_launcher(args.write_launcher, args.tasks, extra_args=stub_args(args.spin_wait_ms / 1e3))
         print(f"{path}  (use --env {path.with_suffix('')})")
         return 0
     if args.mlagents_port is None:

@@ -16,6 +16,7 @@ from collections import deque
 from typing import IO
 
 from trainer.errors import ConfigError, EnvironmentNotFoundError
+from trainer.protocol.pacing import stub_args
 
 logger = logging.getLogger("mlagents_like")
 
@@ -127,8 +128,7 @@ def build_launch_command(
         raise ConfigError(f"--num-areas must be at least 1, got {num_areas}.")
     if is_stub_env(env_path):
         command = [sys.executable, "-m", "unity_stub_env.cli", "--task", env_path[len(STUB_PREFIX):]]
-        if stub_spin_wait > 0:
-            command += ["--spin-wait-ms", f"{stub_spin_wait * 1e3:g}"]
+        command += stub_args(stub_spin_wait)
     else:
         command = [env_path]
     extra = list(env_args or [])

@@ -62,6 +62,11 @@ def configured_spin(environ=os.environ) -> float:
     return ms / 1e3
 
 
+def stub_args(spin_s: float) -> list[str]:
+    """The stub's command-line arguments for a polling budget of ``spin_s`` s (none for 0)."""
+    return ["--spin-wait-ms", f"{spin_s * 1e3:g}"] if spin_s > 0 else []
+
+
 def spin_budget(processes: int, spin_s: float | None = None) -> float:
     """``spin_s`` (default: ``configured_spin()``) if each of ``processes`` busy processes (the
     trainer and its simulators) has a CPU of its own, else 0: polling on a shared CPU would take
