@@ -626,11 +626,13 @@ class Http2Transport:
         call was dropped by the client, or after ``close``."""
         if self.closed:
             return None
-        if not self._ready and not self.client_gone:
-            self._pump(0.0)
-            if self._ready:  # it was there before we looked: nothing to learn about its timing
-                self.pace.forget()
-        if not self._ready and timeout > 0:
+        if not self._ready and timeout <= 0:
+            if not self.client_gone:
+                self._pump(0.0)
+                if self._ready:  # it was there before we looked: nothing to learn about its timing
+                    self.pace.forget()
+        elif not self._ready:
+            # the caller looked with timeout 0 a moment ago: wait_paced's first look is the next one
             deadline = time.monotonic() + timeout
             polled = wait_paced(self.pace, list(self._connections), self._call_ready, timeout)
             while not self._ready:
