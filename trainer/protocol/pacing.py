@@ -67,12 +67,11 @@ def stub_args(spin_s: float) -> list[str]:
     return ["--spin-wait-ms", f"{spin_s * 1e3:g}"] if spin_s > 0 else []
 
 
-def spin_budget(processes: int, spin_s: float | None = None) -> float:
-    """``spin_s`` (default: ``configured_spin()``) if each of ``processes`` busy processes (the
-    trainer and its simulators) has a CPU of its own, else 0: polling on a shared CPU would take
-    it from the process we wait for."""
-    spin_s = configured_spin() if spin_s is None else spin_s
-    return spin_s if usable_cpus() >= processes else 0.0
+def spin_budget(processes: int) -> float:
+    """``configured_spin()`` if each of ``processes`` busy processes (the trainer and its
+    simulators) has a CPU of its own, else 0: polling on a shared CPU would take it from the
+    process we wait for."""
+    return configured_spin() if usable_cpus() >= processes else 0.0
 
 
 class PacedWait:
