@@ -84,6 +84,9 @@ def main(argv: list[str] | None = None) -> int:
         from trainer.config.cli_args import parse_run_options
 
         options = parse_run_options(argv)
+        from trainer.config.support import check_supported
+
+        check_supported(options)  # before the results folder or a simulator exists
         from trainer.protocol.pacing import configured_spin
 
         configured_spin()  # a bad MLAGENTS_LIKE_SPIN_WAIT_MS is refused before the results folder exists

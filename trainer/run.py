@@ -29,6 +29,7 @@ from trainer.config.env_params import ConstantSampler
 from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
 from trainer.config.param_manager import EnvironmentParameterManager
+from trainer.config.support import goal_conditioning_note
 from trainer.envs.pool import EnvPool, PoolSettings
 from trainer.errors import UnityCommunicatorStoppedError, UserError
 from trainer.protocol import side_channels as sc
@@ -43,10 +44,15 @@ logger = logging.getLogger("mlagents_like")
 
 
 # --------------------------------------------------------------------------------- results dir
+def run_dir_of(options) -> str:
+    ck = options.checkpoint_settings
+    return os.path.join(ck.results_dir, ck.run_id)
+
+
 def prepare_run_dir(options) -> str:
     """results/<run-id>: refuse to clobber an earlier run unless --resume or --force."""
     ck = options.checkpoint_settings
-    run_dir = os.path.join(ck.results_dir, ck.run_id)
+    run_dir = run_dir_of(options)
     if os.path.isdir(run_dir) and os.listdir(run_dir):
         if not (ck.resume or ck.force or ck.inference):
             raise UserError(
@@ -113,6 +119,9 @@ class RunState:
             logger.warning("%s: threaded: true is accepted but has no effect here; updates run between "
                            "environment steps, as with threaded: false (same results, no policy lag).",
                            brain)
+        note = goal_conditioning_note(spec.observation_specs, settings)
+        if note:
+            logger.warning("%s: %s", brain, note)
         ck = opts.checkpoint_settings
         seed = opts.env_settings.seed + len(self.runners)
         runner = BehaviorRunner.create(brain, spec, settings, self.run_dir, seed,
@@ -295,9 +304,21 @@ def configure_torch_threads() -> None:
 
 def run_training(options) -> int:
     """Train (or run inference) as configured. Returns the process exit code."""
-    run_dir = prepare_run_dir(options)
     ck = options.checkpoint_settings
     env = options.env_settings
+    pool_settings = PoolSettings(
+        env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
+        num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,
+        bind=env.bind, no_graphics=options.engine_settings.no_graphics,
+        no_graphics_monitor=options.engine_settings.no_graphics_monitor,
+        log_folder=os.path.abspath(os.path.join(run_dir_of(options), "run_logs")),
+        max_lifetime_restarts=env.max_lifetime_restarts, restarts_rate_limit_n=env.restarts_rate_limit_n,
+        restarts_rate_limit_period_s=env.restarts_rate_limit_period_s, debug=options.debug,
+    )
+    state: RunState | None = None
+    # resolves --env first: a wrong path must not leave a results folder that blocks the rerun
+    pool = EnvPool(pool_settings, initial_side_channel=lambda: state.initial_side_channel())
+    run_dir = prepare_run_dir(options)
     status_path = os.path.join(run_dir, "run_logs", "training_status.json")
     keep_status = (ck.resume or ck.inference) and os.path.isfile(status_path)
     status = TrainingStatus.load(status_path) if keep_status else TrainingStatus()
@@ -308,18 +329,7 @@ def run_training(options) -> int:
     tb = TensorboardWriter(run_dir, clear_past_data=ck.force and not ck.resume)
     reporter = StatsReporter([tb, ConsoleWriter(logger, progress=progress)])
     timers = TimerTree(argv=sys.argv)
-    pool_settings = PoolSettings(
-        env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
-        num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,
-        bind=env.bind, no_graphics=options.engine_settings.no_graphics,
-        no_graphics_monitor=options.engine_settings.no_graphics_monitor,
-        log_folder=os.path.abspath(os.path.join(run_dir, "run_logs")),
-        max_lifetime_restarts=env.max_lifetime_restarts, restarts_rate_limit_n=env.restarts_rate_limit_n,
-        restarts_rate_limit_period_s=env.restarts_rate_limit_period_s, debug=options.debug,
-    )
-    state: RunState | None = None
     write_run_options(options, run_dir)
-    pool = EnvPool(pool_settings, initial_side_channel=lambda: state.initial_side_channel())
     state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
                      [sc.SideChannelRouter() for _ in range(env.num_envs)])
     for line in params.describe():

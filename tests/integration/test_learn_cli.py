@@ -97,7 +97,8 @@ def test_resume_continues_at_saved_step(tmp_path, basic_config, env_no_proxy):
     assert 300 < third["Basic"]["final_checkpoint"]["steps"] < 400
 
 
-@pytest.mark.parametrize("case", ["malformed", "unknown_key", "wrong_type", "missing_env", "missing_yaml"])
+@pytest.mark.parametrize("case", ["malformed", "unknown_key", "wrong_type", "missing_env", "missing_yaml",
+                                  "unsupported_feature", "unknown_stub_task"])
 def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
     cfg = tmp_path / "c.yaml"
     args = [str(cfg), "--env", "stub:basic", "--results-dir", str(tmp_path / "res")]
@@ -117,10 +118,20 @@ def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
         expect = "NoSuchGame"
     elif case == "missing_yaml":
         expect = "c.yaml"
+    elif case == "unsupported_feature":  # refused before a simulator is launched, not dropped quietly
+        cfg.write_text("behaviors:\n  Basic:\n    trainer_type: ppo\n    reward_signals:\n"
+                       "      extrinsic: {}\n      curiosity: {strength: 0.02}\n")
+        expect = "'behaviors.Basic.reward_signals.curiosity'"
+    elif case == "unknown_stub_task":  # the simulator's own reason is quoted, not just "see its log"
+        cfg.write_text("behaviors: {}\n")
+        args[2] = "stub:nosuch"
+        expect = "known tasks: ball3d, basic"
     r = learn(args, cwd=tmp_path, timeout=60, env=env_no_proxy)
     assert r.returncode == 2, (r.stdout[-2000:], r.stderr[-2000:])
     assert expect in r.stderr
     assert "Traceback" not in r.stderr and "Traceback" not in r.stdout
+    if case != "unknown_stub_task":
+        assert not (tmp_path / "res").exists()  # nothing written, no simulator started
 
 
 def test_bad_spin_wait_setting_is_refused_before_anything_is_written(tmp_path, basic_config, env_no_proxy):

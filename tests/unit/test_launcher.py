@@ -256,6 +256,22 @@ def test_output_goes_to_the_log_file_when_asked(tmp_path):
     assert process.close() == 3
     assert log_path.read_text() == "hello\n"
     assert "exited with code 3" in process.describe()
+    assert process.describe().endswith("its log ends: 'hello')")  # the reason, in the trainer's error
+
+
+def test_an_exited_process_is_described_by_its_last_log_line(tmp_path):
+    log_path = tmp_path / "Player-0.log"
+    log_path.write_text("x" * 5000 + "\nstarting\n  bad --task nosuch; known: basic  \n\n")
+    process = SimulatorProcess([sys.executable, "-c", "import sys; sys.exit(2)", "-logFile", str(log_path)])
+    assert process.last_log_line() == "bad --task nosuch; known: basic"
+    assert process.last_log_line(limit=3) == "bad"
+    assert "its log ends" not in process.describe()  # not started: nothing to report
+    process.start()
+    assert process.wait_for_exit(10)
+    assert process.describe().endswith("exited with code 2; log %s; its log ends: "
+                                       "'bad --task nosuch; known: basic')" % log_path)
+    process.close()
+    assert SimulatorProcess([sys.executable], log_folder=None).last_log_line() == ""
 
 
 def test_stub_command_is_recognised():

@@ -277,7 +277,23 @@ class SimulatorProcess:
         else:
             state = f"pid {self._process.pid}, exited with code {self._process.returncode}"
         log = f"; log {self.log_path}" if self.log_path else ""
+        if self._process is not None and self._process.poll() is not None:
+            last = self.last_log_line()
+            log += f"; its log ends: {last!r}" if last else ""
         return f"simulator worker {self.worker_id} ({self.name}, port {self.port}, {state}{log})"
+
+    def last_log_line(self, limit: int = 300) -> str:
+        """The last non-empty line of the log file (at most ``limit`` characters), or ''."""
+        if not self.log_path:
+            return ""
+        try:
+            with open(self.log_path, "rb") as f:
+                f.seek(max(0, os.fstat(f.fileno()).st_size - 4096))
+                lines = f.read().decode("utf-8", "replace").splitlines()
+        except OSError:
+            return ""
+        last = next((line.strip() for line in reversed(lines) if line.strip()), "")
+        return last[:limit]
 
 
 # --------------------------------------------------------------------------------------------

@@ -76,7 +76,7 @@ class _Worker:
             )
             self.process = SimulatorProcess(cmd, self.worker_id, log_folder=s.log_folder, debug=s.debug)
         is_alive = self.process.is_alive if self.process else None
-        describe = self.process.describe() if self.process else "the Unity Editor"
+        describe = self.process.describe if self.process else "the Unity Editor"
         self.endpoint = UnityEndpoint(self.port, bind=s.bind, timeout_wait=s.timeout_wait,
                                       is_alive=is_alive, describe=describe, spin_wait=self.spin_wait)
         self.endpoint.start()  # bind before launching, so the simulator finds us listening

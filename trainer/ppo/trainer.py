@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from trainer.config.support import SUPPORTED_REWARD_SIGNALS
 from trainer.errors import ConfigError
 from trainer.ppo import fast_actor, numpy_update
 from trainer.ppo.adam import Adam
@@ -25,7 +26,6 @@ from trainer.ppo.policy import Policy
 from trainer.ppo.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
 from trainer.protocol.types import BehaviorSpec
 
-SUPPORTED_REWARD_SIGNALS = ("extrinsic",)
 ADVANTAGE_STD_EPSILON = 1e-10
 
 

@@ -219,12 +219,14 @@ class UnityEndpoint:
         bind: str = "127.0.0.1",
         timeout_wait: float = 60.0,
         is_alive: Callable[[], bool] | None = None,
-        describe: str = "",
+        describe: str | Callable[[], str] = "",
         transport: str | None = None,
         spin_wait: float = 0.0,
     ) -> None:
-        """``spin_wait`` (s): poll for the simulator's next call up to this long past when it is
-        due instead of sleeping through it (trainer/protocol/pacing.py; HTTP/2 transport only)."""
+        """``describe``: names the simulator in errors (a callable is asked when the error
+        happens, so it can say how the process ended). ``spin_wait`` (s): poll for the simulator's
+        next call up to this long past when it is due instead of sleeping through it
+        (trainer/protocol/pacing.py; HTTP/2 transport only)."""
         self.port = port
         self.bind = bind
         self.timeout_wait = float(timeout_wait)
@@ -457,7 +459,8 @@ class UnityEndpoint:
         )
 
     def _for(self) -> str:
-        return f" ({self.describe})" if self.describe else ""
+        describe = self.describe() if callable(self.describe) else self.describe
+        return f" ({describe})" if describe else ""
 
 
 class _Call:

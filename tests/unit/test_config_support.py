@@ -1,0 +1,82 @@
+"""Features of the Release-22 schema that this trainer does not implement are refused, by key."""
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+
+from trainer.config import load_run_options
+from trainer.config.support import check_supported, goal_conditioning_note, unsupported
+from trainer.errors import ConfigError
+from trainer.protocol.types import DimensionProperty, ObservationSpec, ObservationType
+
+
+def options(tmp_path, text: str):
+    path = tmp_path / "c.yaml"
+    path.write_text(textwrap.dedent(text))
+    return load_run_options(str(path))
+
+
+def test_plain_ppo_config_is_supported(tmp_path):
+    opts = options(tmp_path, """
+        behaviors:
+          Basic:
+            trainer_type: ppo
+            hyperparameters: {shared_critic: false}
+            network_settings: {normalize: true, goal_conditioning_type: none}
+            reward_signals: {extrinsic: {gamma: 0.9}}
+    """)
+    assert unsupported(opts.behaviors["Basic"]) == []
+    check_supported(opts)  # no error
+
+
+def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
+    opts = options(tmp_path, """
+        behaviors:
+          Striker:
+            trainer_type: ppo
+            hyperparameters: {shared_critic: true}
+            network_settings: {memory: {memory_size: 64, sequence_length: 16}}
+            reward_signals:
+              extrinsic: {}
+              rnd: {}
+              gail: {demo_path: a.demo}
+            behavioral_cloning: {demo_path: a.demo}
+            self_play: {save_steps: 100}
+          Goalie:
+            trainer_type: ppo
+    """)
+    assert [key for key, _ in unsupported(opts.behaviors["Striker"])] == [
+        "network_settings.memory", "hyperparameters.shared_critic", "reward_signals.rnd",
+        "reward_signals.gail", "behavioral_cloning", "self_play"]
+    assert unsupported(opts.behaviors["Goalie"]) == []
+    with pytest.raises(ConfigError) as info:
+        check_supported(opts)
+    message = str(info.value)
+    assert message.count("'behaviors.Striker.") == 6 and "Goalie" not in message
+    assert "'behaviors.Striker.self_play': remove the block" in message
+
+
+def test_default_settings_are_checked_too(tmp_path):
+    opts = options(tmp_path, """
+        default_settings:
+          trainer_type: ppo
+          reward_signals: {curiosity: {}}
+        behaviors: {}
+    """)
+    with pytest.raises(ConfigError, match=r"'default_settings\.reward_signals\.curiosity'"):
+        check_supported(opts)
+
+
+def test_goal_signals_warn_only_with_hyper_conditioning(tmp_path):
+    opts = options(tmp_path, """
+        behaviors:
+          Hyper: {trainer_type: ppo}
+          Plain: {trainer_type: ppo, network_settings: {goal_conditioning_type: none}}
+    """)
+    vector = ObservationSpec((4,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "obs")
+    goal = ObservationSpec((2,), (DimensionProperty.NONE,), ObservationType.GOAL_SIGNAL, "goal")
+    note = goal_conditioning_note([vector, goal], opts.behaviors["Hyper"])
+    assert note is not None and "goal" in note and "goal_conditioning_type: none" in note
+    assert goal_conditioning_note([vector, goal], opts.behaviors["Plain"]) is None
+    assert goal_conditioning_note([vector], opts.behaviors["Hyper"]) is None

@@ -1,0 +1,63 @@
+"""What of the Release-22 schema this trainer can train with, checked before anything starts.
+
+The loader accepts every key ML-Agents accepts (so a config is never "unknown" here just because
+a feature is missing), and the resolved configuration.yaml keeps them all. A feature that would
+change what is trained, but that the PPO room does not implement, must not be dropped quietly:
+``check_supported`` refuses it with one message per run, before the results folder or a
+simulator exists, naming each key and what to do.
+"""
+from __future__ import annotations
+
+from trainer.config.settings import RunOptions, TrainerSettings
+from trainer.errors import ConfigError
+from trainer.protocol.types import ObservationType
+
+# reward signals the PPO room computes (trainer/ppo/trainer.py checks the same list)
+SUPPORTED_REWARD_SIGNALS = ("extrinsic",)
+
+
+def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
+    """(key path inside a behavior block, what to do) for each unsupported feature ``ts`` uses."""
+    found = []
+    if ts.network_settings.memory is not None:
+        found.append(("network_settings.memory", "remove the memory block (no LSTM yet)"))
+    if ts.hyperparameters.shared_critic:
+        found.append(("hyperparameters.shared_critic", "set it to false (actor and critic are separate)"))
+    for name in ts.reward_signals:
+        if name not in SUPPORTED_REWARD_SIGNALS:
+            found.append((f"reward_signals.{name}",
+                          f"remove it; supported reward signals: {', '.join(SUPPORTED_REWARD_SIGNALS)}"))
+    if ts.behavioral_cloning is not None:
+        found.append(("behavioral_cloning", "remove the block (no imitation learning yet)"))
+    if ts.self_play is not None:
+        found.append(("self_play", "remove the block; without it every team of a behavior trains one "
+                                   "shared policy, as in ML-Agents without self-play"))
+    return found
+
+
+def check_supported(options: RunOptions) -> None:
+    """ConfigError listing every unsupported feature of every behavior block (default_settings
+    included: it applies to behaviors the YAML does not name)."""
+    blocks = dict(options.behaviors)
+    if options.default_settings is not None:
+        blocks = {**{"default_settings": options.default_settings}, **blocks}
+    problems = []
+    for name, ts in blocks.items():
+        prefix = name if name == "default_settings" else f"behaviors.{name}"
+        problems += [f"'{prefix}.{key}': {advice}" for key, advice in unsupported(ts)]
+    if problems:
+        raise ConfigError(
+            "this configuration uses features mlagents-like-learn does not support yet, so it "
+            "would not train what it says:\n  " + "\n  ".join(problems)
+        )
+
+
+def goal_conditioning_note(observation_specs, ts: TrainerSettings) -> str | None:
+    """A warning when a behavior sends goal-signal observations that ML-Agents would feed to its
+    hyper-network (goal_conditioning_type: hyper, the default); they are plain inputs here."""
+    goals = [o.name for o in observation_specs if o.observation_type == ObservationType.GOAL_SIGNAL]
+    if not goals or ts.network_settings.goal_conditioning_type != "hyper":
+        return None
+    return (f"goal-signal observation(s) {', '.join(goals)} are concatenated with the other inputs, "
+            "as with goal_conditioning_type: none; the hyper-network conditioning is not implemented. "
+            "Set goal_conditioning_type: none to silence this.")
