@@ -18,7 +18,7 @@ from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
 from trainer.errors import UserError
 from trainer.ppo.buffer import Trajectory
-from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.trainer import PPOTrainer
 from trainer.protocol.types import BehaviorSpec
 
@@ -48,6 +48,13 @@ def hyperparams_from_settings(settings) -> PPOHyperparams:
         deterministic=n.deterministic,
         memory=n.memory is not None,
         reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
+        reward_signal_networks={
+            name: SignalNetwork(learning_rate=rs.learning_rate, hidden_units=rs.network_settings.hidden_units,
+                                num_layers=rs.network_settings.num_layers,
+                                normalize=rs.network_settings.normalize,
+                                vis_encode_type=rs.network_settings.vis_encode_type)
+            for name, rs in settings.reward_signals.items() if name != "extrinsic"
+        },
     )
 
 

@@ -131,7 +131,8 @@ class AgentTracker:
         self.length[slots] = t + 1
         self.pending[slots] = False
 
-    def _emit(self, slot: int, next_obs: list[np.ndarray], done: bool, interrupted: bool) -> Trajectory:
+    def _emit(self, slot: int, agent_id: int, next_obs: list[np.ndarray], done: bool,
+              interrupted: bool) -> Trajectory:
         n = int(self.length[slot])
         has_mask = self.mask.shape[-1] > 0
         traj = Trajectory(
@@ -144,6 +145,7 @@ class AgentTracker:
             action_masks=self.mask[slot, :n].copy() if has_mask else None,
             done=done,
             interrupted=interrupted,
+            episode=(id(self), agent_id),  # Unity gives every episode a new id
         )
         self.length[slot] = 0
         return traj
@@ -166,7 +168,7 @@ class AgentTracker:
         for k, slot in zip(idx, slots):
             slot = int(slot)
             if self.length[slot] > 0:
-                emit(self._emit(slot, [o[k] for o in ts.obs], True, bool(ts.interrupted[k])))
+                emit(self._emit(slot, int(ts.agent_id[k]), [o[k] for o in ts.obs], True, bool(ts.interrupted[k])))
             self.episodes.rewards.append(float(self.ep_reward[slot]))
             self.episodes.lengths.append(int(self.ep_length[slot]))
             del self._slot_of[int(ts.agent_id[k])]
@@ -187,7 +189,7 @@ class AgentTracker:
             self.ep_length[s] += 1
             full = np.nonzero(has & (self.length[slots] >= self.time_horizon))[0]
             for k in full:
-                emit(self._emit(int(slots[k]), [o[k] for o in ds.obs], False, False))
+                emit(self._emit(int(slots[k]), int(ds.agent_id[k]), [o[k] for o in ds.obs], False, False))
         t = self.length[slots]  # below time_horizon: full trajectories were just cut
         for buf, o in zip(self.obs, ds.obs):
             buf[slots, t] = o

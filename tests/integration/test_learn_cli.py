@@ -120,8 +120,8 @@ def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
         expect = "c.yaml"
     elif case == "unsupported_feature":  # refused before a simulator is launched, not dropped quietly
         cfg.write_text("behaviors:\n  Basic:\n    trainer_type: ppo\n    reward_signals:\n"
-                       "      extrinsic: {}\n      curiosity: {strength: 0.02}\n")
-        expect = "'behaviors.Basic.reward_signals.curiosity'"
+                       "      extrinsic: {}\n      gail: {demo_path: expert.demo}\n")
+        expect = "'behaviors.Basic.reward_signals.gail'"
     elif case == "unknown_stub_task":  # the simulator's own reason is quoted, not just "see its log"
         cfg.write_text("behaviors: {}\n")
         args[2] = "stub:nosuch"

@@ -146,3 +146,33 @@ def test_two_behaviors_in_one_run_each_train_and_stop_at_their_own_max_steps(tmp
     # 3DBall finished first but was not updated or checkpointed again while Basic trained on
     assert sorted(c["steps"] for c in status["3DBall"]["checkpoints"])[-1] == status["3DBall"]["final_checkpoint"]["steps"]
     assert len(status["3DBall"]["checkpoints"]) == 3
+
+
+def test_curiosity_and_rnd_train_report_and_resume(tmp_path, env_no_proxy):
+    text = textwrap.dedent(BASIC_YAML.format(max_steps="{max_steps}", interval=100000, summary=300, keep=5))
+    text = text.replace("reward_signals: {extrinsic: {gamma: 0.9, strength: 1.0}}", textwrap.dedent("""\
+        reward_signals:
+              extrinsic: {gamma: 0.9, strength: 1.0}
+              curiosity: {gamma: 0.99, strength: 0.02, network_settings: {hidden_units: 16}}
+              rnd: {gamma: 0.99, strength: 0.01, network_settings: {hidden_units: 8, num_layers: 1}}"""))
+    cfg, cfg2 = tmp_path / "c.yaml", tmp_path / "c2.yaml"
+    cfg.write_text(text.replace("{max_steps}", "900"))
+    cfg2.write_text(text.replace("{max_steps}", "1500"))
+    port = free_port_block()
+    common = ["--env", "stub:basic", "--run-id", "cur", "--seed", "2", "--results-dir", str(tmp_path / "results"),
+              "--base-port", str(port)]
+    r = learn([str(cfg), *common], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    tags = tb_scalars(tmp_path / "results/cur/Basic")
+    for tag in ("Losses/Curiosity Forward Loss", "Losses/Curiosity Inverse Loss", "Losses/RND Loss",
+                "Policy/Curiosity Reward", "Policy/Curiosity Value Estimate", "Policy/Rnd Reward",
+                "Policy/Rnd Value Estimate", "Policy/Extrinsic Value Estimate"):
+        assert tag in tags, tag
+    # rnd rewards are positive prediction errors; curiosity's stay <= 1 (capped at 1/strength, times strength)
+    assert all(v > 0 for _, v in tags["Policy/Rnd Reward"])
+    assert all(0 <= v for _, v in tags["Policy/Curiosity Reward"])
+    r2 = learn([str(cfg2), *common, "--resume"], cwd=tmp_path, env=env_no_proxy)
+    assert r2.returncode == 0, r2.stderr[-3000:]
+    assert "starts untrained" not in r2.stdout + r2.stderr  # the providers came back from checkpoint.pt
+    steps = [s for s, _ in tb_scalars(tmp_path / "results/cur/Basic")["Losses/RND Loss"]]
+    assert max(steps) >= 1500 - 300

@@ -24,7 +24,7 @@ def test_plain_ppo_config_is_supported(tmp_path):
             trainer_type: ppo
             hyperparameters: {shared_critic: false}
             network_settings: {normalize: true, goal_conditioning_type: none}
-            reward_signals: {extrinsic: {gamma: 0.9}}
+            reward_signals: {extrinsic: {gamma: 0.9}, curiosity: {strength: 0.02}, rnd: {}}
     """)
     assert unsupported(opts.behaviors["Basic"]) == []
     check_supported(opts)  # no error
@@ -47,13 +47,13 @@ def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
             trainer_type: ppo
     """)
     assert [key for key, _ in unsupported(opts.behaviors["Striker"])] == [
-        "network_settings.memory", "hyperparameters.shared_critic", "reward_signals.rnd",
-        "reward_signals.gail", "behavioral_cloning", "self_play"]
+        "network_settings.memory", "hyperparameters.shared_critic", "reward_signals.gail",
+        "behavioral_cloning", "self_play"]
     assert unsupported(opts.behaviors["Goalie"]) == []
     with pytest.raises(ConfigError) as info:
         check_supported(opts)
     message = str(info.value)
-    assert message.count("'behaviors.Striker.") == 6 and "Goalie" not in message
+    assert message.count("'behaviors.Striker.") == 5 and "Goalie" not in message
     assert "'behaviors.Striker.self_play': remove the block" in message
 
 
@@ -61,10 +61,10 @@ def test_default_settings_are_checked_too(tmp_path):
     opts = options(tmp_path, """
         default_settings:
           trainer_type: ppo
-          reward_signals: {curiosity: {}}
+          reward_signals: {gail: {demo_path: a.demo}}
         behaviors: {}
     """)
-    with pytest.raises(ConfigError, match=r"'default_settings\.reward_signals\.curiosity'"):
+    with pytest.raises(ConfigError, match=r"'default_settings\.reward_signals\.gail'"):
         check_supported(opts)
 
 

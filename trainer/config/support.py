@@ -13,7 +13,7 @@ from trainer.errors import ConfigError
 from trainer.protocol.types import ObservationType
 
 # reward signals the PPO room computes (trainer/ppo/trainer.py checks the same list)
-SUPPORTED_REWARD_SIGNALS = ("extrinsic",)
+SUPPORTED_REWARD_SIGNALS = ("extrinsic", "curiosity", "rnd")
 
 
 def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:

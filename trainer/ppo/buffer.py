@@ -6,6 +6,7 @@ update starts, so appending a trajectory costs no copy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +24,7 @@ class Trajectory:
     action_masks: np.ndarray | None  # bool [T, sum(branches)], True = masked; None = nothing masked
     done: bool  # the trajectory ends its episode
     interrupted: bool  # the episode ended by max_step_reached: bootstrap anyway
+    episode: Any = None  # identifies the agent's episode across its trajectories (per-episode sums)
 
     def __len__(self) -> int:
         return int(self.rewards.shape[0])

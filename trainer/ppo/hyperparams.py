@@ -9,6 +9,17 @@ from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
+class SignalNetwork:
+    """An intrinsic reward signal's own learner (its ``learning_rate`` and ``network_settings``)."""
+
+    learning_rate: float = 3.0e-4
+    hidden_units: int = 128
+    num_layers: int = 2
+    normalize: bool = False
+    vis_encode_type: str = "simple"
+
+
+@dataclass(frozen=True)
 class PPOHyperparams:
     batch_size: int = 1024  # experiences per minibatch
     buffer_size: int = 10240  # an update runs once the buffer holds MORE than this many experiences
@@ -31,3 +42,5 @@ class PPOHyperparams:
     reward_signals: dict[str, tuple[float, float]] = field(
         default_factory=lambda: {"extrinsic": (0.99, 1.0)}
     )
+    # curiosity / rnd -> the network that computes that signal's reward (reward_providers.py)
+    reward_signal_networks: dict[str, SignalNetwork] = field(default_factory=dict)

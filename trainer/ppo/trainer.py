@@ -5,6 +5,7 @@ then ``update`` whenever ``ready_to_update`` says the buffer holds more than buf
 """
 from __future__ import annotations
 
+import logging
 import os
 from itertools import chain
 from typing import Any
@@ -23,14 +24,20 @@ from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
 from trainer.ppo.networks import Critic
 from trainer.ppo.policy import Policy
+from trainer.ppo.reward_providers import Experience, make_providers
 from trainer.ppo.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
 from trainer.protocol.types import BehaviorSpec
 
 ADVANTAGE_STD_EPSILON = 1e-10
+logger = logging.getLogger("mlagents_like")
 
 
 def _obs_key(index: int) -> str:
     return f"obs_{index}"
+
+
+def _next_obs_key(index: int) -> str:
+    return f"next_obs_{index}"
 
 
 def normalize_advantages(advantages: np.ndarray) -> np.ndarray:
@@ -65,6 +72,10 @@ class PPOTrainer:
             p for p in chain(self.policy.actor.parameters(), self.critic.parameters()) if p.requires_grad
         ]
         self.optimizer = Adam(trainable, lr=hyperparams.learning_rate)  # torch.optim costs 2 s of imports
+        # curiosity / rnd: their own networks and optimizers (reward_providers.py)
+        self.providers = make_providers(behavior_spec, hyperparams, seed + 4)
+        self._needs_next_obs = any(p.needs_next_obs for p in self.providers.values())
+        self._episode_intrinsic: dict[Any, dict[str, float]] = {}  # episode -> reward sums so far
         self.shuffle_generator = torch.Generator()
         self.shuffle_generator.manual_seed(seed + 3)
         self.buffer = UpdateBuffer()
@@ -105,16 +116,36 @@ class PPOTrainer:
         values, next_values = self._value_estimates(traj)
         terminal = traj.done and not traj.interrupted
         fields: dict[str, np.ndarray] = {_obs_key(i): np.asarray(o, np.float32) for i, o in enumerate(traj.obs)}
+        experience = None
+        if self.providers:
+            next_obs = None
+            if self._needs_next_obs:  # what each step led to: the following step's obs, then next_obs
+                next_obs = [np.concatenate([o[1:], n[None]], axis=0).astype(np.float32)
+                            for o, n in zip(traj.obs, traj.next_obs)]
+                fields.update({_next_obs_key(i): o for i, o in enumerate(next_obs)})
+            experience = Experience(traj.obs, next_obs, traj.continuous_actions, traj.discrete_actions)
         advantages = []
         stats: dict[str, float] = {}
         for name, (gamma, strength) in self.hyperparams.reward_signals.items():
-            rewards = np.asarray(traj.rewards, dtype=np.float32) * np.float32(strength)
-            bootstrap = 0.0 if terminal else next_values[name]
+            provider = self.providers.get(name)
+            if provider is None:
+                rewards = np.asarray(traj.rewards, dtype=np.float32) * np.float32(strength)
+                bootstrap = 0.0 if terminal else next_values[name]
+            else:
+                rewards = provider.evaluate(experience) * np.float32(strength)
+                bootstrap = next_values[name]  # intrinsic rewards ignore done: always bootstrap
+                sums = self._episode_intrinsic.setdefault(traj.episode, {})
+                sums[name] = sums.get(name, 0.0) + float(np.sum(rewards))
+                if traj.done:
+                    stats[f"Policy/{provider.stat_name} Reward"] = sums[name]
             advantage, returns = gae(rewards, values[name], bootstrap, gamma, self.hyperparams.lambd)
             advantages.append(advantage)
             fields[f"values:{name}"] = values[name]
             fields[f"returns:{name}"] = returns
-            stats[f"Policy/{name.capitalize()} Value Estimate"] = float(np.mean(values[name]))
+            stats[f"Policy/{getattr(provider, 'stat_name', name.capitalize())} Value Estimate"] = float(
+                np.mean(values[name]))
+        if traj.done:
+            self._episode_intrinsic.pop(traj.episode, None)
         fields["advantages"] = np.mean(np.stack(advantages), axis=0).astype(np.float32)
         fields["continuous_actions"] = np.asarray(traj.continuous_actions, np.float32).reshape(length, -1)
         fields["discrete_actions"] = np.asarray(traj.discrete_actions, np.int64).reshape(length, -1)
@@ -186,13 +217,29 @@ class PPOTrainer:
         data = self._buffer_tensors()
         for order in self._minibatch_indices():
             index = order.to(self.device)
-            loss, stats = self._minibatch_loss({k: v[index] for k, v in data.items()}, beta, epsilon)
+            batch = {k: v[index] for k, v in data.items()}
+            loss, stats = self._minibatch_loss(batch, beta, epsilon)
             self.optimizer.zero_grad()
             loss.backward()
             self.optimizer.step()
+            stats.update(self._update_providers(batch))
             for key, value in stats.items():
                 collected.setdefault(key, []).append(value)
         return self._finish_update(collected, learning_rate, beta, epsilon)
+
+    def _update_providers(self, batch: dict[str, Any]) -> dict[str, float]:
+        """One step of every curiosity / rnd learner on a PPO minibatch (numpy or torch columns)."""
+        if not self.providers:
+            return {}
+        n_obs = len(self.behavior_spec.observation_specs)
+        experience = Experience(
+            [batch[_obs_key(i)] for i in range(n_obs)],
+            [batch[_next_obs_key(i)] for i in range(n_obs)] if self._needs_next_obs else None,
+            batch["continuous_actions"], batch["discrete_actions"])
+        stats: dict[str, float] = {}
+        for provider in self.providers.values():
+            stats.update(provider.update(experience))
+        return stats
 
     def _minibatch_indices(self):
         """num_epoch shuffles of the buffer (the seeded shuffle generator), cut into full minibatches."""
@@ -212,6 +259,8 @@ class PPOTrainer:
             data["allowed"] = (~masks).astype(np.float32)
         n_obs = len(self.behavior_spec.observation_specs)
         obs = [data.pop(_obs_key(i)) for i in range(n_obs)]
+        provider_columns = {k: data.pop(k) for k in [_next_obs_key(i) for i in range(n_obs)] if k in data}
+        provider_columns.update({_obs_key(i): o for i, o in enumerate(obs)} if self.providers else {})
         stepper = numpy_update.NumpyPPO(self)
         actor_in, critic_in = stepper.prepare(obs)
         try:
@@ -219,6 +268,9 @@ class PPOTrainer:
                 index = order.numpy()
                 batch = {k: v[index] for k, v in data.items()}
                 stats = stepper.step(batch, actor_in[index], critic_in[index], learning_rate, beta, epsilon)
+                if self.providers:
+                    batch.update({k: v[index] for k, v in provider_columns.items()})
+                    stats.update(self._update_providers(batch))
                 for key, value in stats.items():
                     collected.setdefault(key, []).append(value)
         finally:
@@ -237,7 +289,7 @@ class PPOTrainer:
 
         Tensors are live references; save (or copy) before the next update.
         """
-        return {
+        state = {
             "Policy": self.policy.actor.state_dict(),
             "global_step": {"step": torch.tensor(self.step, dtype=torch.int64)},
             "Optimizer:value_optimizer": self.optimizer.state_dict(),
@@ -247,12 +299,22 @@ class PPOTrainer:
                 "minibatch_shuffle": self.shuffle_generator.get_state(),
             },
         }
+        for provider in self.providers.values():
+            state.update(provider.state_dict())
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.policy.actor.load_state_dict(state["Policy"])
         self.critic.load_state_dict(state["Optimizer:critic"])
         self.optimizer.load_state_dict(state["Optimizer:value_optimizer"])
         self.step = int(state["global_step"]["step"])
+        for name, provider in self.providers.items():
+            keys = provider.state_dict().keys()
+            if all(key in state for key in keys):
+                provider.load_state_dict(state)
+            else:
+                logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
+                               name, ", ".join(sorted(k for k in keys if k not in state)))
         rng = state.get("RNG")
         if rng is not None:
             self.policy.generator.set_state(rng["policy_sampling"])
