@@ -122,16 +122,15 @@ def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
         cfg.write_text("behaviors:\n  Basic:\n    trainer_type: ppo\n    reward_signals:\n"
                        "      extrinsic: {}\n      gail: {demo_path: expert.demo}\n")
         expect = "'behaviors.Basic.reward_signals.gail'"
-    elif case == "unknown_stub_task":  # the simulator's own reason is quoted, not just "see its log"
+    elif case == "unknown_stub_task":
         cfg.write_text("behaviors: {}\n")
         args[2] = "stub:nosuch"
-        expect = "known tasks: ball3d, basic"
+        expect = "unknown stub task 'nosuch'; use --env stub:TASK with one of: ball3d, basic"
     r = learn(args, cwd=tmp_path, timeout=60, env=env_no_proxy)
     assert r.returncode == 2, (r.stdout[-2000:], r.stderr[-2000:])
     assert expect in r.stderr
     assert "Traceback" not in r.stderr and "Traceback" not in r.stdout
-    if case != "unknown_stub_task":
-        assert not (tmp_path / "res").exists()  # nothing written, no simulator started
+    assert not (tmp_path / "res").exists()  # nothing written, no simulator started
 
 
 def test_bad_spin_wait_setting_is_refused_before_anything_is_written(tmp_path, basic_config, env_no_proxy):
@@ -168,13 +167,16 @@ def test_simulator_that_never_connects_times_out(tmp_path, basic_config, env_no_
 
 def test_simulator_that_dies_is_reported(tmp_path, basic_config, env_no_proxy):
     game = tmp_path / "Crash.x86_64"
-    game.write_text("#!/bin/sh\nexit 3\n")
+    # like a player that fails at start: it writes its reason to its -logFile, then exits
+    game.write_text('#!/bin/sh\nfor a; do [ "$prev" = -logFile ] && echo "Fatal: no display" >> "$a"; '
+                    'prev="$a"; done\nexit 3\n')
     game.chmod(0o755)
     r = learn([str(basic_config()), "--env", str(tmp_path / "Crash"), "--timeout-wait", "30",
                "--base-port", str(free_port_block()), "--results-dir", str(tmp_path / "res")],
               cwd=tmp_path, timeout=60, env=env_no_proxy)
     assert r.returncode == 2
     assert "Crash" in r.stderr and "Traceback" not in r.stderr
+    assert "exited with code 3" in r.stderr and "its log ends: 'Fatal: no display'" in r.stderr
 
 
 def _assert_final_save(run, min_steps: int) -> None:

@@ -29,9 +29,18 @@ def test_stub_passes_through():
     assert resolve_env_path("stub:ball3d") == "stub:ball3d"
 
 
-def test_empty_stub_task_is_an_error():
-    with pytest.raises(EnvironmentNotFoundError, match="stub:TASK"):
+def test_empty_or_unknown_stub_task_is_an_error():
+    with pytest.raises(EnvironmentNotFoundError, match="names no stub task; use --env stub:TASK"):
         resolve_env_path("stub:")
+    with pytest.raises(EnvironmentNotFoundError, match="unknown stub task 'balls'.*ball3d, basic"):
+        resolve_env_path("stub:balls")
+
+
+def test_the_trainers_stub_task_list_is_the_stubs():
+    from unity_stub_env.task_names import TASK_NAMES
+    from unity_stub_env.tasks import TASKS
+
+    assert sorted(TASK_NAMES) == sorted(TASKS)
 
 
 @pytest.mark.parametrize("given", ["Game", "Game.x86_64", "Game.exe", "Game.app", "Game.x86"])

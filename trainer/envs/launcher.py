@@ -73,9 +73,14 @@ def resolve_env_path(env_path: str, platform: str | None = None) -> str:
     Raises EnvironmentNotFoundError naming every candidate tried.
     """
     if is_stub_env(env_path):
-        if not env_path[len(STUB_PREFIX):].strip():
+        from unity_stub_env.task_names import TASK_NAMES
+
+        task = env_path[len(STUB_PREFIX):].strip()
+        if task not in TASK_NAMES:
+            what = f"names the unknown stub task {task!r}" if task else "names no stub task"
             raise EnvironmentNotFoundError(
-                f"--env {env_path!r} names no stub task; use --env stub:TASK (for example stub:basic)."
+                f"--env {env_path!r} {what}; use --env stub:TASK with one of: {', '.join(TASK_NAMES)} "
+                "(unity-stub-env --list describes them)."
             )
         return env_path
     platform = platform or sys.platform

@@ -1,0 +1,5 @@
+"""The stub's task names without importing the tasks (MuJoCo takes ~0.4 s to import), so the
+trainer can refuse ``--env stub:NAME`` for an unknown NAME before it creates anything.
+tests/stub keeps this in step with ``unity_stub_env.tasks.TASKS``."""
+
+TASK_NAMES = ("ball3d", "basic")
