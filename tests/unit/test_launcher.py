@@ -34,6 +34,9 @@ def test_empty_or_unknown_stub_task_is_an_error():
         resolve_env_path("stub:")
     with pytest.raises(EnvironmentNotFoundError, match="unknown stub task 'balls'.*ball3d, basic"):
         resolve_env_path("stub:balls")
+    with pytest.raises(EnvironmentNotFoundError, match="unknown stub task 'nope'"):
+        resolve_env_path("stub:basic,nope")
+    assert resolve_env_path("stub:basic,ball3d") == "stub:basic,ball3d"  # several behaviors in one stub
 
 
 def test_the_trainers_stub_task_list_is_the_stubs():

@@ -75,9 +75,10 @@ def resolve_env_path(env_path: str, platform: str | None = None) -> str:
     if is_stub_env(env_path):
         from unity_stub_env.task_names import TASK_NAMES
 
-        task = env_path[len(STUB_PREFIX):].strip()
-        if task not in TASK_NAMES:
-            what = f"names the unknown stub task {task!r}" if task else "names no stub task"
+        given = env_path[len(STUB_PREFIX):].strip()
+        unknown = [name for name in given.split(",") if name not in TASK_NAMES]  # TASK[,TASK...]
+        if not given or unknown:
+            what = f"names the unknown stub task {', '.join(map(repr, unknown))}" if given else "names no stub task"
             raise EnvironmentNotFoundError(
                 f"--env {env_path!r} {what}; use --env stub:TASK with one of: {', '.join(TASK_NAMES)} "
                 "(unity-stub-env --list describes them)."
