@@ -46,7 +46,8 @@ def hyperparams_from_settings(settings) -> PPOHyperparams:
         num_layers=n.num_layers,
         vis_encode_type=n.vis_encode_type,
         deterministic=n.deterministic,
-        memory=n.memory is not None,
+        memory_size=n.memory.memory_size if n.memory is not None else 0,
+        sequence_length=n.memory.sequence_length if n.memory is not None else 64,
         reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
         reward_signal_networks={
             name: SignalNetwork(learning_rate=rs.learning_rate, hidden_units=rs.network_settings.hidden_units,

@@ -14,7 +14,9 @@ Rules (spec §10 "Experience assembly"):
 - extrinsic reward = reward + group_reward;
 - a trajectory is cut at ``time_horizon`` experiences (next_obs = the current observation, not done)
   or when the episode ends (next_obs = the terminal observation, done, interrupted if max_step);
-- episode ids change every episode, so a slot lives for exactly one episode.
+- episode ids change every episode, so a slot lives for exactly one episode;
+- with a recurrent policy, each slot also keeps the agent's memory (zero when its episode starts)
+  and each experience the memory its action was computed from.
 """
 from __future__ import annotations
 
@@ -38,9 +40,10 @@ class EpisodeStats:
 class AgentTracker:
     """Slot-array experience builder for one behavior in one env connection."""
 
-    def __init__(self, spec: BehaviorSpec, time_horizon: int, capacity: int = 16):
+    def __init__(self, spec: BehaviorSpec, time_horizon: int, capacity: int = 16, memory_size: int = 0):
         self.spec = spec
         self.time_horizon = int(time_horizon)
+        self.memory_size = int(memory_size)
         self._slot_of: dict[int, int] = {}
         self._index: tuple[np.ndarray, np.ndarray] | None = None  # _slot_of sorted by id
         self._free: list[int] = []
@@ -75,6 +78,9 @@ class AgentTracker:
         self.pending = grow(g("pending"), (), bool)
         self.ep_reward = grow(g("ep_reward"), (), np.float64)
         self.ep_length = grow(g("ep_length"), (), np.int64)
+        m = self.memory_size
+        self.memory = grow(g("memory"), (m,), np.float32)  # the next decision's input memory
+        self.mem_in = grow(g("mem_in"), (h, m), np.float32)  # per experience: its input memory
         self._free.extend(range(cap - 1, self._cap - 1, -1))
         self._cap = cap
 
@@ -98,8 +104,15 @@ class AgentTracker:
             self.length[s] = 0
             self.ep_reward[s] = 0.0
             self.ep_length[s] = 0
+            self.memory[s] = 0.0
         self._index = None
         return self._lookup(ids)[0]
+
+    def memories_for(self, agent_ids: np.ndarray) -> np.ndarray:
+        """float32 [n, memory_size]: the memory each agent's next action starts from (zero for an
+        agent not seen yet, i.e. a new episode)."""
+        found, known = self._lookup(np.asarray(agent_ids, dtype=np.int64))
+        return np.where(known[:, None], self.memory[found], np.float32(0.0)).astype(np.float32)
 
     def _lookup(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(slot int64 [n], known bool [n]) of episode ids; a slot is meaningless where unknown."""
@@ -143,6 +156,7 @@ class AgentTracker:
             discrete_actions=self.disc[slot, :n].copy(),
             log_probs=self.logp[slot, :n].copy(),
             action_masks=self.mask[slot, :n].copy() if has_mask else None,
+            memories=self.mem_in[slot, :n].copy() if self.memory_size else None,
             done=done,
             interrupted=interrupted,
             episode=(id(self), agent_id),  # Unity gives every episode a new id
@@ -202,9 +216,15 @@ class AgentTracker:
         discrete: np.ndarray,
         log_probs: np.ndarray,
         action_mask: np.ndarray | None,
+        memories_in: np.ndarray | None = None,
+        memories_out: np.ndarray | None = None,
     ) -> None:
-        """Store the policy's answer for the agents of the last ``on_decision`` call."""
+        """Store the policy's answer for the agents of the last ``on_decision`` call (and, for a
+        recurrent policy, the memories it read and the ones it returned)."""
         t = self.length[slots]
+        if self.memory_size:
+            self.mem_in[slots, t] = memories_in
+            self.memory[slots] = memories_out
         self.cont[slots, t] = continuous_raw
         self.disc[slots, t] = discrete
         self.logp[slots, t] = log_probs

@@ -157,19 +157,22 @@ class RunState:
                 decision, terminal = results[env_id].steps[behavior]
                 steps.append((env_id, decision, terminal, slice(start, start + len(decision))))
                 start += len(decision)
-            out = masks = None
+            out = masks = memories = None
             if start:
-                out, masks = self._act(runner, [decision for _, decision, _, _ in steps if len(decision)])
+                out, masks, memories = self._act(runner, behavior, [s for s in steps if len(s[1])])
                 for env_id, decision, _, rows in steps:
                     if len(decision):
                         actions[env_id][behavior] = ActionTuple(out.env_actions.continuous[rows],
                                                                 out.env_actions.discrete[rows])
-            decided.append((runner, behavior, steps, out, masks))
+            decided.append((runner, behavior, steps, out, masks, memories))
         return actions, decided
 
-    def _act(self, runner: BehaviorRunner, deciding: list):
+    def _act(self, runner: BehaviorRunner, behavior: str, steps: list):
+        """One forward pass for the deciding agents of ``steps`` (each env's (env_id, decision,
+        terminal, rows)). Returns (policy output, masks, the memories it started from or None)."""
         spec = runner.spec
         branches = spec.action_spec.discrete_branches
+        deciding = [decision for _, decision, _, _ in steps]
         if len(deciding) == 1:
             obs = deciding[0].obs
             masks = concat_masks(deciding[0], branches)
@@ -177,28 +180,40 @@ class RunState:
             obs = [np.concatenate([d.obs[i] for d in deciding]) for i in range(len(spec.observation_specs))]
             ms = [concat_masks(d, branches) for d in deciding]
             masks = None if ms[0] is None else np.concatenate(ms)
+        memories = None
+        if runner.trainer.policy.memory_size:  # each agent continues from its own LSTM state
+            memories = np.concatenate([self._tracker(env_id, behavior, runner).memories_for(decision.agent_id)
+                                       for env_id, decision, _, _ in steps])
         with self.timers.scope("policy.act"):
-            out = runner.trainer.policy.act(obs, masks, deterministic=runner.settings.network_settings.deterministic)
-        return out, masks
+            out = runner.trainer.policy.act(obs, masks, deterministic=runner.settings.network_settings.deterministic,
+                                            memories=memories)
+        return out, masks, memories
+
+    def _tracker(self, env_id: int, behavior: str, runner: BehaviorRunner) -> AgentTracker:
+        tracker = self.trackers.get((env_id, behavior))
+        if tracker is None:
+            tracker = AgentTracker(runner.spec, runner.settings.time_horizon,
+                                   memory_size=runner.trainer.policy.memory_size)
+            self.trackers[(env_id, behavior)] = tracker
+        return tracker
 
     def record(self, decided: list, trajectories: list) -> None:
         """Experience assembly for the decisions of ``decide`` (after their actions went out):
         rewards paired with the previous actions, finished trajectories appended to
         ``trajectories``, the new observations and actions remembered, episode statistics."""
-        for runner, behavior, steps, out, masks in decided:
+        for runner, behavior, steps, out, masks, memories in decided:
             emit = lambda t, r=runner: trajectories.append((r, t))  # noqa: E731
             for env_id, decision, terminal, rows in steps:
-                tracker = self.trackers.get((env_id, behavior))
-                if tracker is None:
-                    tracker = AgentTracker(runner.spec, runner.settings.time_horizon)
-                    self.trackers[(env_id, behavior)] = tracker
+                tracker = self._tracker(env_id, behavior, runner)
                 tracker.on_terminal(terminal, emit)
                 slots = tracker.on_decision(decision, emit)
                 runner.add_episodes(tracker.episodes.rewards)
                 self._episode_stats(runner.brain, tracker)
                 if len(decision):
                     tracker.on_actions(slots, out.continuous_raw[rows], out.discrete[rows],
-                                       out.log_probs[rows], None if masks is None else masks[rows])
+                                       out.log_probs[rows], None if masks is None else masks[rows],
+                                       None if memories is None else memories[rows],
+                                       None if memories is None else out.memories[rows])
 
     def _episode_stats(self, brain: str, tracker: AgentTracker) -> None:
         eps = tracker.drain_episodes()
@@ -273,6 +288,8 @@ class RunState:
     def drop_trajectories(self) -> None:
         for t in self.trackers.values():
             t.drop_all()
+        for runner in self.runners.values():
+            runner.trainer.forget_episodes()
 
     @property
     def finished(self) -> bool:

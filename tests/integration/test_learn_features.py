@@ -176,3 +176,28 @@ def test_curiosity_and_rnd_train_report_and_resume(tmp_path, env_no_proxy):
     assert "starts untrained" not in r2.stdout + r2.stderr  # the providers came back from checkpoint.pt
     steps = [s for s, _ in tb_scalars(tmp_path / "results/cur/Basic")["Losses/RND Loss"]]
     assert max(steps) >= 1500 - 300
+
+
+def test_memory_trains_exports_recurrent_onnx_and_resumes(tmp_path, env_no_proxy):
+    import onnx
+
+    text = textwrap.dedent(BASIC_YAML.format(max_steps="{max_steps}", interval=100000, summary=300, keep=5))
+    text = text.replace("network_settings: {normalize: false, hidden_units: 20, num_layers: 1}",
+                        "network_settings: {normalize: true, hidden_units: 20, num_layers: 1,\n"
+                        "                       memory: {memory_size: 8, sequence_length: 4}}")
+    assert "memory_size: 8" in text
+    cfg, cfg2 = tmp_path / "m.yaml", tmp_path / "m2.yaml"
+    cfg.write_text(text.replace("{max_steps}", "600"))
+    cfg2.write_text(text.replace("{max_steps}", "900"))
+    common = ["--env", "stub:basic", "--run-id", "mem", "--seed", "4", "--results-dir", str(tmp_path / "results"),
+              "--base-port", str(free_port_block())]
+    r = learn([str(cfg), *common], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    model = onnx.load(str(tmp_path / "results/mem/Basic.onnx"))
+    assert [i.name for i in model.graph.input][-1] == "recurrent_in"
+    assert [o.name for o in model.graph.output][-1] == "recurrent_out"
+    assert "Losses/Value Loss" in tb_scalars(tmp_path / "results/mem/Basic")
+    r2 = learn([str(cfg2), *common, "--resume"], cwd=tmp_path, env=env_no_proxy)
+    assert r2.returncode == 0, r2.stderr[-3000:]
+    status = json.loads((tmp_path / "results/mem/run_logs/training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] >= 900

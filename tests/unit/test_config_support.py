@@ -23,7 +23,7 @@ def test_plain_ppo_config_is_supported(tmp_path):
           Basic:
             trainer_type: ppo
             hyperparameters: {shared_critic: false}
-            network_settings: {normalize: true, goal_conditioning_type: none}
+            network_settings: {normalize: true, goal_conditioning_type: none, memory: {memory_size: 8}}
             reward_signals: {extrinsic: {gamma: 0.9}, curiosity: {strength: 0.02}, rnd: {}}
     """)
     assert unsupported(opts.behaviors["Basic"]) == []
@@ -47,13 +47,12 @@ def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
             trainer_type: ppo
     """)
     assert [key for key, _ in unsupported(opts.behaviors["Striker"])] == [
-        "network_settings.memory", "hyperparameters.shared_critic", "reward_signals.gail",
-        "behavioral_cloning", "self_play"]
+        "hyperparameters.shared_critic", "reward_signals.gail", "behavioral_cloning", "self_play"]
     assert unsupported(opts.behaviors["Goalie"]) == []
     with pytest.raises(ConfigError) as info:
         check_supported(opts)
     message = str(info.value)
-    assert message.count("'behaviors.Striker.") == 5 and "Goalie" not in message
+    assert message.count("'behaviors.Striker.") == 4 and "Goalie" not in message
     assert "'behaviors.Striker.self_play': remove the block" in message
 
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import pytest
 import torch
@@ -83,11 +82,6 @@ def test_unknown_or_too_small_visual_encoder_is_a_config_error():
         Critic([visual_spec((3, 36, 36))], ["extrinsic"], PPOHyperparams(vis_encode_type="vit"))
     with pytest.raises(ConfigError, match="needs height and width >= 36"):
         Critic([visual_spec((3, 30, 30))], ["extrinsic"], PPOHyperparams(vis_encode_type="nature_cnn"))
-
-
-def test_memory_is_a_clear_config_error():
-    with pytest.raises(ConfigError, match="network_settings.memory is not supported yet"):
-        Actor([vector_spec(2)], ActionSpec(1, ()), replace(PPOHyperparams(), memory=True))
 
 
 def test_masked_logits_give_zero_probability():

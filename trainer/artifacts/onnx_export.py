@@ -1,9 +1,11 @@
 """Export a policy's actor to the ONNX model Unity's inference engine loads (spec §8).
 
 Legacy TorchScript exporter, opset 9. Inputs obs_0..obs_{n-1} (+ action_masks, float 1 = allowed, only
-with discrete branches). Outputs, in order: version_number, memory_size, then for continuous actions
-continuous_actions / continuous_action_output_shape / deterministic_continuous_actions, then for
-discrete actions discrete_actions / discrete_action_output_shape / deterministic_discrete_actions.
+with discrete branches; + recurrent_in [batch, 1, memory_size], only with memory). Outputs, in order:
+version_number, memory_size, then for continuous actions continuous_actions /
+continuous_action_output_shape / deterministic_continuous_actions, then for discrete actions
+discrete_actions / discrete_action_output_shape / deterministic_discrete_actions, then with memory
+recurrent_out [batch, 1, memory_size] (h then c, as Unity feeds back into recurrent_in).
 Sampling (RandomNormalLike, Multinomial) and observation normalisation happen inside the graph.
 """
 from __future__ import annotations
@@ -33,11 +35,17 @@ class ExportableActor(nn.Module):
         self.n_obs = n_obs
         self.has_continuous = actor.action_spec.continuous_size > 0
         self.has_discrete = len(actor.action_spec.discrete_branches) > 0
+        self.has_memory = actor.network_body.lstm is not None
 
     def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
         observations = list(inputs[: self.n_obs])
         allowed = inputs[self.n_obs] if self.has_discrete else None
-        mu, logits = self.actor.heads(observations, allowed)
+        memories_out = None
+        if self.has_memory:  # [batch, 1, m] in the graph's interface, [1, batch, m] for the LSTM
+            memories = torch.transpose(inputs[-1], 0, 1)
+            mu, logits, memories_out = self.actor.heads_with_memory(observations, allowed, memories, 1)
+        else:
+            mu, logits = self.actor.heads(observations, allowed)
         outputs = [self.actor.version_number, self.actor.memory_size_vector]
         if mu is not None:
             sigma = torch.exp(mu * 0 + self.actor.log_sigma)
@@ -54,6 +62,8 @@ class ExportableActor(nn.Module):
                 self.actor.discrete_act_size_vector,
                 torch.cat([torch.argmax(p, dim=1, keepdim=True) for p in probs], dim=1),
             ]
+        if memories_out is not None:
+            outputs.append(torch.transpose(memories_out, 0, 1))
         return tuple(outputs)
 
 
@@ -66,6 +76,9 @@ def _names(policy: Policy) -> tuple[list[str], list[str]]:
     if spec.discrete_branches:
         inputs.append("action_masks")
         outputs += ["discrete_actions", "discrete_action_output_shape", "deterministic_discrete_actions"]
+    if policy.memory_size:
+        inputs.append("recurrent_in")
+        outputs.append("recurrent_out")
     return inputs, outputs
 
 
@@ -76,9 +89,11 @@ def export_to_bytes(policy: Policy) -> bytes:
     dummy = [torch.zeros((1, *spec.shape)) for spec in policy.behavior_spec.observation_specs]
     if policy.action_spec.discrete_branches:
         dummy.append(torch.ones((1, sum(policy.action_spec.discrete_branches))))
+    if policy.memory_size:
+        dummy.append(torch.zeros((1, 1, policy.memory_size)))
     input_names, output_names = _names(policy)
     dynamic_axes = {name: {0: BATCH_AXIS} for name in input_names}
-    for name in ("continuous_actions", "discrete_actions"):
+    for name in ("continuous_actions", "discrete_actions", "recurrent_out"):
         if name in output_names:
             dynamic_axes[name] = {0: BATCH_AXIS}
     buffer = io.BytesIO()

@@ -25,6 +25,7 @@ class Trajectory:
     done: bool  # the trajectory ends its episode
     interrupted: bool  # the episode ended by max_step_reached: bootstrap anyway
     episode: Any = None  # identifies the agent's episode across its trajectories (per-episode sums)
+    memories: np.ndarray | None = None  # float32 [T, memory_size]: each action's input memory (LSTM)
 
     def __len__(self) -> int:
         return int(self.rewards.shape[0])

@@ -25,7 +25,9 @@ from trainer.ppo.networks import Actor, Critic
 
 
 def supports(module: Actor | Critic) -> bool:
-    return all(isinstance(e, VectorInput) for e in module.network_body.observation_encoder.encoders)
+    """Vector observations only, no LSTM (a recurrent network acts and learns in torch)."""
+    body = module.network_body
+    return body.lstm is None and all(isinstance(e, VectorInput) for e in body.observation_encoder.encoders)
 
 
 class _Tracked:

@@ -37,7 +37,9 @@ class PPOHyperparams:
     num_layers: int = 2
     vis_encode_type: str = "simple"  # simple | nature_cnn | resnet | match3 | fully_connected
     deterministic: bool = False  # act with the mean / argmax instead of sampling
-    memory: bool = False  # network_settings.memory present (not supported yet: raises ConfigError)
+    # network_settings.memory: an LSTM (hidden memory_size / 2) after the hidden layers; 0 = none
+    memory_size: int = 0
+    sequence_length: int = 64  # with memory: experiences per training sequence
     # reward signal name (e.g. "extrinsic") -> (gamma, strength)
     reward_signals: dict[str, tuple[float, float]] = field(
         default_factory=lambda: {"extrinsic": (0.99, 1.0)}

@@ -1,6 +1,8 @@
 """Actor and critic networks (separate bodies, encoders and normalisers, as ML-Agents' default).
 
-Body: encoders of every observation concatenated -> num_layers x (Linear -> Swish).
+Body: encoders of every observation concatenated -> num_layers x (Linear -> Swish), then, with
+network_settings.memory, an LSTM of hidden size memory_size / 2 (Xavier-uniform kernels, zero
+biases, forget-gate bias 1). A memory [.., memory_size] is the hidden state h then the cell c.
 Actor heads: Gaussian mu (Kaiming normal, gain 0.2) with a state-independent log_sigma (init 0);
 one Linear per discrete branch (Kaiming normal, gain 0.1). Critic: one Linear(h, 1) per reward signal.
 """
@@ -22,11 +24,35 @@ MODEL_EXPORT_VERSION = 3
 
 
 def check_network_settings(hyperparams: PPOHyperparams) -> None:
-    if hyperparams.memory:
-        raise ConfigError(
-            "network_settings.memory is not supported yet; remove the memory block from the "
-            "behavior's network_settings"
-        )
+    if hyperparams.memory_size % 2 or hyperparams.memory_size < 0:
+        raise ConfigError(f"network_settings.memory.memory_size must be even and > 0, got {hyperparams.memory_size}")
+
+
+class LSTMMemory(nn.Module):
+    """nn.LSTM (batch first) whose state travels as one tensor: memories [1, n_seq, 2 * hidden]."""
+
+    FORGET_BIAS = 1.0
+
+    def __init__(self, input_size: int, memory_size: int):
+        super().__init__()
+        self.hidden_size = memory_size // 2
+        self.lstm = nn.LSTM(input_size, self.hidden_size, 1, batch_first=True)
+        with torch.no_grad():
+            for name, param in self.lstm.named_parameters():
+                for block in param.data.chunk(4, dim=0):  # gates i, f, g, o
+                    if "weight" in name:
+                        nn.init.xavier_uniform_(block)
+                    else:
+                        block.zero_()
+                if "bias" in name:
+                    param.data[self.hidden_size:2 * self.hidden_size] += self.FORGET_BIAS
+
+    def forward(self, inputs: torch.Tensor, memories: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """inputs [n_seq, L, in], memories [1, n_seq, m] -> (outputs [n_seq, L, m/2], memories [1, n_seq, m])."""
+        h0 = memories[:, :, :self.hidden_size].contiguous()
+        c0 = memories[:, :, self.hidden_size:].contiguous()
+        outputs, (h, c) = self.lstm(inputs, (h0, c0))
+        return outputs, torch.cat([h, c], dim=-1)
 
 
 class ObservationEncoder(nn.Module):
@@ -77,9 +103,23 @@ class NetworkBody(nn.Module):
         self.output_size = hyperparams.hidden_units if hyperparams.num_layers > 0 else (
             self.observation_encoder.output_size
         )
+        self.memory_size = hyperparams.memory_size
+        self.lstm = LSTMMemory(self.output_size, self.memory_size) if self.memory_size else None
+        if self.lstm is not None:
+            self.output_size = self.memory_size // 2
 
     def forward(self, observations: Sequence[torch.Tensor]) -> torch.Tensor:
+        """[n, *shape_i] ... -> [n, output_size] (networks without memory)."""
         return self.hidden(self.observation_encoder(observations))
+
+    def forward_memory(self, observations: Sequence[torch.Tensor], memories: torch.Tensor,
+                       sequence_length: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
+        """Rows are n_seq sequences of ``sequence_length`` consecutive steps; memories
+        [1, n_seq, m] is each sequence's start. -> (encoding [rows, m/2], memories [1, n_seq, m])."""
+        encoding = self.hidden(self.observation_encoder(observations))
+        encoding = encoding.reshape(-1, sequence_length, encoding.shape[-1])
+        encoding, memories = self.lstm(encoding, memories)
+        return encoding.reshape(-1, self.memory_size // 2), memories
 
     def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:
         self.observation_encoder.update_normalization(observations)
@@ -101,7 +141,7 @@ class Actor(nn.Module):
         super().__init__()
         self.action_spec = action_spec
         self.version_number = _constant([float(MODEL_EXPORT_VERSION)])
-        self.memory_size_vector = _constant([0.0])
+        self.memory_size_vector = _constant([float(hyperparams.memory_size)])
         self.continuous_act_size_vector = _constant([float(action_spec.continuous_size)])
         self.discrete_act_size_vector = _constant([[float(b) for b in action_spec.discrete_branches]])
         self.network_body = NetworkBody(observation_specs, hyperparams)
@@ -124,7 +164,18 @@ class Actor(nn.Module):
 
         allowed: float [n, sum(branches)], 1 = allowed, 0 = masked (None = all allowed).
         """
-        encoding = self.network_body(observations)
+        return self.heads_of(self.network_body(observations), allowed)
+
+    def heads_with_memory(self, observations: Sequence[torch.Tensor], allowed: torch.Tensor | None,
+                          memories: torch.Tensor, sequence_length: int = 1
+                          ) -> tuple[torch.Tensor | None, list[torch.Tensor], torch.Tensor]:
+        """``heads`` of a recurrent actor (see NetworkBody.forward_memory), plus the new memories."""
+        encoding, memories = self.network_body.forward_memory(observations, memories, sequence_length)
+        mu, logits = self.heads_of(encoding, allowed)
+        return mu, logits, memories
+
+    def heads_of(self, encoding: torch.Tensor, allowed: torch.Tensor | None
+                 ) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
         mu = self.mu(encoding) if self.mu is not None else None
         logits = []
         for index, branch in enumerate(self.discrete_branches):
@@ -155,6 +206,12 @@ class Critic(nn.Module):
         """Value estimates per reward signal, each [n]."""
         encoding = self.network_body(observations)
         return {name: head(encoding).squeeze(1) for name, head in self.value_heads.items()}
+
+    def forward_memory(self, observations: Sequence[torch.Tensor], memories: torch.Tensor,
+                       sequence_length: int = 1) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+        """``forward`` of a recurrent critic (see NetworkBody.forward_memory), plus the new memories."""
+        encoding, memories = self.network_body.forward_memory(observations, memories, sequence_length)
+        return {name: head(encoding).squeeze(1) for name, head in self.value_heads.items()}, memories
 
     def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:
         self.network_body.update_normalization(observations)

@@ -36,6 +36,7 @@ class PolicyOutput:
     discrete: np.ndarray  # int32 [n, b]
     log_probs: np.ndarray  # float32 [n, c + b], per continuous dimension then per discrete branch
     entropy: np.ndarray  # float32 [n], mean over Gaussian dims + sum over branches
+    memories: np.ndarray | None = None  # float32 [n, memory_size]: each agent's next memory (LSTM only)
 
 
 def allowed_from_mask(action_mask: np.ndarray | None) -> torch.Tensor | None:
@@ -61,17 +62,19 @@ class Policy:
         self.generator.manual_seed(seed + 1)
         # vector-only actors on the CPU decide in numpy (see fast_actor for why)
         use_numpy = self.device.type == "cpu" and fast_actor.supports(self.actor)
+        self.memory_size = hyperparams.memory_size  # > 0: act takes and returns each agent's memory
         self._numpy_actor = fast_actor.NumpyActor(self.actor) if use_numpy else None
 
     def _to_tensors(self, obs: Sequence[np.ndarray]) -> list[torch.Tensor]:
         return [torch.as_tensor(np.asarray(o, dtype=np.float32), device=self.device) for o in obs]
 
     def act(self, obs: Sequence[np.ndarray], action_mask: np.ndarray | None = None,
-            deterministic: bool = False) -> PolicyOutput:
+            deterministic: bool = False, memories: np.ndarray | None = None) -> PolicyOutput:
         """Sample actions for n agents in one forward pass.
 
         obs: one float32 array [n, *shape_i] per observation. action_mask: bool [n, sum(branches)],
         True = masked, or None. ``deterministic`` (or hyperparams.deterministic) uses mean / argmax.
+        memories: float32 [n, memory_size] for a recurrent actor (None = all zero, new episodes).
         """
         deterministic = deterministic or self.hyperparams.deterministic
         if self._numpy_actor is not None:
@@ -81,8 +84,16 @@ class Policy:
             tensors = self._to_tensors(obs)
             if allowed is not None:
                 allowed = allowed.to(self.device)
-            mu, logits = self.actor.heads(tensors, allowed)
             n = tensors[0].shape[0]
+            memories_out = None
+            if self.memory_size:
+                memory_in = (torch.zeros((n, self.memory_size)) if memories is None
+                             else torch.as_tensor(np.asarray(memories, dtype=np.float32)))
+                mu, logits, memories_out = self.actor.heads_with_memory(
+                    tensors, allowed, memory_in.to(self.device).unsqueeze(0), 1)
+                memories_out = memories_out[0].cpu().numpy()
+            else:
+                mu, logits = self.actor.heads(tensors, allowed)
             log_prob_parts: list[torch.Tensor] = []
             discrete_entropies: list[torch.Tensor] = []
             continuous_entropy = None
@@ -115,6 +126,7 @@ class Policy:
             discrete=discrete_np,
             log_probs=log_probs.cpu().numpy(),
             entropy=entropy.cpu().numpy(),
+            memories=memories_out,
         )
 
     def _act_numpy(self, obs: Sequence[np.ndarray], action_mask: np.ndarray | None,
@@ -168,13 +180,19 @@ class Policy:
         )
 
     def evaluate(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None,
-                 continuous_actions: torch.Tensor, discrete_actions: torch.Tensor
+                 continuous_actions: torch.Tensor, discrete_actions: torch.Tensor,
+                 memories: torch.Tensor | None = None, sequence_length: int = 1
                  ) -> tuple[torch.Tensor, torch.Tensor]:
         """Log-probs [n, c + b] and entropy [n] of stored actions under the current actor (with grad).
 
         continuous_actions: raw samples [n, c]; discrete_actions: int [n, b]; allowed: float [n, sum(branches)].
+        A recurrent actor reads the n rows as sequences of ``sequence_length`` starting from
+        ``memories`` [1, n / sequence_length, memory_size].
         """
-        mu, logits = self.actor.heads(obs, allowed)
+        if memories is not None:
+            mu, logits, _ = self.actor.heads_with_memory(obs, allowed, memories, sequence_length)
+        else:
+            mu, logits = self.actor.heads(obs, allowed)
         parts: list[torch.Tensor] = []
         continuous_entropy = None
         if mu is not None:

@@ -32,6 +32,7 @@ from torch import nn
 from trainer.ppo.adam import Adam
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.layers import KAIMING_NORMAL, Swish, linear_layer
+from trainer.ppo.losses import masked_mean
 from trainer.ppo.networks import NetworkBody
 from trainer.protocol.types import ActionSpec, BehaviorSpec
 
@@ -45,7 +46,7 @@ EPSILON = 1e-10
 def _body_hyperparams(base: PPOHyperparams, network: SignalNetwork) -> PPOHyperparams:
     return dataclasses.replace(base, hidden_units=network.hidden_units, num_layers=network.num_layers,
                                normalize=network.normalize, vis_encode_type=network.vis_encode_type,
-                               memory=False)
+                               memory_size=0)  # the reference ignores memory in these encoders
 
 
 def _tensors(arrays: Sequence[Any]) -> list[torch.Tensor]:
@@ -61,9 +62,12 @@ def _one_hot(discrete: torch.Tensor, branches: Sequence[int]) -> torch.Tensor:
 
 class Experience:
     """The columns a provider reads: observations [n, ...] per input, the next observations,
-    the raw continuous actions [n, c] and the discrete actions [n, B] (numpy or torch)."""
+    the raw continuous actions [n, c] and the discrete actions [n, B] (numpy or torch), and for
+    recurrent minibatches the masks [n] that are 0 on sequence padding."""
 
-    def __init__(self, obs, next_obs, continuous, discrete) -> None:
+    def __init__(self, obs, next_obs, continuous, discrete, masks=None) -> None:
+        self.masks = None if masks is None else torch.as_tensor(np.asarray(masks, np.float32)) if not isinstance(
+            masks, torch.Tensor) else masks.float()
         self.obs = _tensors(obs)
         self.next_obs = _tensors(next_obs) if next_obs is not None else None
         self.continuous = torch.as_tensor(np.asarray(continuous, np.float32)) if not isinstance(
@@ -108,17 +112,19 @@ class CuriosityNetwork(nn.Module):
         return torch.sum(0.5 * (target - predicted) ** 2, dim=1)
 
     def inverse_loss(self, exp: Experience) -> torch.Tensor:
+        """Mean (over unpadded rows) of the action-prediction error."""
         hidden = self.inverse_encoder(
             torch.cat([self.state_encoder(exp.obs), self.state_encoder(exp.next_obs)], dim=1))
         loss = torch.zeros(())
         if self.continuous_prediction is not None:
-            loss = loss + torch.mean(torch.sum((exp.continuous - self.continuous_prediction(hidden)) ** 2, dim=1))
+            loss = loss + masked_mean(torch.sum((exp.continuous - self.continuous_prediction(hidden)) ** 2, dim=1),
+                                      exp.masks)
         if self.discrete_prediction is not None:
             logits = self.discrete_prediction(hidden)
             probs = torch.cat([torch.softmax(block, dim=1) for block in
                                torch.split(logits, list(self.action_spec.discrete_branches), dim=1)], dim=1)
             true = _one_hot(exp.discrete, self.action_spec.discrete_branches)
-            loss = loss + torch.mean(torch.sum(-torch.log(probs + EPSILON) * true, dim=1))
+            loss = loss + masked_mean(torch.sum(-torch.log(probs + EPSILON) * true, dim=1), exp.masks)
         return loss
 
 
@@ -145,7 +151,7 @@ class CuriosityProvider:
 
     def update(self, exp: Experience) -> dict[str, float]:
         self.has_updated = True
-        forward = torch.mean(self.network.forward_error(exp))
+        forward = masked_mean(self.network.forward_error(exp), exp.masks)  # RND, like the reference, does not mask
         inverse = self.network.inverse_loss(exp)
         loss = LOSS_MULTIPLIER * (FORWARD_WEIGHT * forward + (1.0 - FORWARD_WEIGHT) * inverse)
         self.optimizer.zero_grad()

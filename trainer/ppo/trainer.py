@@ -21,7 +21,7 @@ from trainer.ppo.buffer import Trajectory, UpdateBuffer
 from trainer.ppo.fast_actor import NumpyCritic
 from trainer.ppo.gae import gae
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
+from trainer.ppo.losses import masked_mean, policy_loss, ppo_loss, value_loss
 from trainer.ppo.networks import Critic
 from trainer.ppo.policy import Policy
 from trainer.ppo.reward_providers import Experience, make_providers
@@ -76,6 +76,10 @@ class PPOTrainer:
         self.providers = make_providers(behavior_spec, hyperparams, seed + 4)
         self._needs_next_obs = any(p.needs_next_obs for p in self.providers.values())
         self._episode_intrinsic: dict[Any, dict[str, float]] = {}  # episode -> reward sums so far
+        # LSTM: experiences train in sequences of this length; the critic's memory at the end of an
+        # episode's last trajectory is where its next trajectory starts
+        self.sequence_length = hyperparams.sequence_length if hyperparams.memory_size else 1
+        self._critic_memory: dict[Any, torch.Tensor] = {}
         self.shuffle_generator = torch.Generator()
         self.shuffle_generator.manual_seed(seed + 3)
         self.buffer = UpdateBuffer()
@@ -104,6 +108,33 @@ class PPOTrainer:
         next_values = {name: float(v[-1]) for name, v in estimates.items()}
         return values, next_values
 
+    def _value_estimates_by_sequence(self, traj: Trajectory):
+        """A recurrent critic run over the trajectory sequence by sequence (whole sequences of
+        ``sequence_length`` from the start, then the rest), its memory carried on from the agent's
+        previous trajectory. Returns (values [T] per signal, V(next) per signal, the critic memory
+        each step's sequence starts from [T, m])."""
+        length, step = len(traj), self.sequence_length
+        memory = self._critic_memory.pop(traj.episode, None)
+        if memory is None:
+            memory = torch.zeros((1, 1, self.hyperparams.memory_size), device=self.device)
+        obs = self._tensors(traj.obs)
+        starts = np.zeros((length, self.hyperparams.memory_size), dtype=np.float32)
+        parts: dict[str, list[torch.Tensor]] = {}
+        bounds = list(range(0, length - length % step, step)) + ([length - length % step] if length % step else [])
+        with torch.inference_mode():
+            for begin in bounds:
+                end = min(begin + step, length)
+                starts[begin:end] = memory[0, 0].cpu().numpy()
+                values, memory = self.critic.forward_memory([o[begin:end] for o in obs], memory, end - begin)
+                for name, v in values.items():
+                    parts.setdefault(name, []).append(v)
+            next_obs = self._tensors([n[None] for n in traj.next_obs])
+            next_values, _ = self.critic.forward_memory(next_obs, memory, 1)
+        if not traj.done:
+            self._critic_memory[traj.episode] = memory
+        return ({name: torch.cat(v).cpu().numpy() for name, v in parts.items()},
+                {name: float(v[0]) for name, v in next_values.items()}, starts)
+
     def process_trajectory(self, traj: Trajectory) -> dict[str, float]:
         """Normalise, estimate values, compute GAE per reward signal, and buffer the experiences."""
         length = len(traj)
@@ -113,7 +144,10 @@ class PPOTrainer:
             obs_tensors = self._tensors(traj.obs)
             self.policy.actor.update_normalization(obs_tensors)
             self.critic.update_normalization(obs_tensors)
-        values, next_values = self._value_estimates(traj)
+        if self.hyperparams.memory_size:
+            values, next_values, critic_memories = self._value_estimates_by_sequence(traj)
+        else:
+            values, next_values = self._value_estimates(traj)
         terminal = traj.done and not traj.interrupted
         fields: dict[str, np.ndarray] = {_obs_key(i): np.asarray(o, np.float32) for i, o in enumerate(traj.obs)}
         experience = None
@@ -155,9 +189,22 @@ class PPOTrainer:
             np.zeros((length, mask_width), dtype=bool) if traj.action_masks is None
             else np.asarray(traj.action_masks, dtype=bool)
         )
+        if self.hyperparams.memory_size:
+            fields["memory"] = np.asarray(traj.memories, np.float32)
+            fields["critic_memory"] = critic_memories
+            fields["masks"] = np.ones(length, dtype=np.float32)
+            pad = -length % self.sequence_length  # whole sequences: zeros after the last step, masks 0
+            if pad:
+                fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
         self.buffer.append(fields)
         self.step += length
         return stats
+
+    def forget_episodes(self) -> None:
+        """After a RESET or a simulator restart the unfinished episodes never continue: drop what
+        was kept for them (critic memories, intrinsic reward sums)."""
+        self._critic_memory.clear()
+        self._episode_intrinsic.clear()
 
     # ------------------------------------------------------------------ update
     def ready_to_update(self) -> bool:
@@ -184,12 +231,21 @@ class PPOTrainer:
         n_obs = len(self.behavior_spec.observation_specs)
         obs = [batch[_obs_key(i)] for i in range(n_obs)]
         allowed = batch["allowed"] if self.behavior_spec.action_spec.discrete_branches else None
-        log_probs, entropy = self.policy.evaluate(
-            obs, allowed, batch["continuous_actions"], batch["discrete_actions"]
-        )
-        values = self.critic(obs)
+        mask = None
+        if self.hyperparams.memory_size:  # rows are whole sequences; each starts from its stored memories
+            step = self.sequence_length
+            mask = batch["masks"]
+            log_probs, entropy = self.policy.evaluate(
+                obs, allowed, batch["continuous_actions"], batch["discrete_actions"],
+                batch["memory"][::step].unsqueeze(0), step)
+            values, _ = self.critic.forward_memory(obs, batch["critic_memory"][::step].unsqueeze(0), step)
+        else:
+            log_probs, entropy = self.policy.evaluate(
+                obs, allowed, batch["continuous_actions"], batch["discrete_actions"]
+            )
+            values = self.critic(obs)
         names = list(values)
-        policy_term = policy_loss(batch["advantages"], log_probs, batch["log_probs"], epsilon)
+        policy_term = policy_loss(batch["advantages"], log_probs, batch["log_probs"], epsilon, mask)
         # The reference's trust region is anchored at the *returns*, not at the old value estimates:
         # in mlagents 1.1.0 RewardSignalUtil.value_estimates_key(name) is the returns key, so
         # _process_trajectory's value estimates are overwritten by the returns and the update reads
@@ -197,12 +253,12 @@ class PPOTrainer:
         # is not held to +-epsilon per update. We reproduce that (measured: anchoring at the real
         # old values learned ball3d measurably slower than mlagents-learn on the same stub).
         returns = {n: batch[f"returns:{n}"] for n in names}
-        value_term = value_loss(values, returns, returns, epsilon)
-        loss = ppo_loss(policy_term, value_term, entropy, beta)
+        value_term = value_loss(values, returns, returns, epsilon, mask)
+        loss = ppo_loss(policy_term, value_term, entropy, beta, mask)
         return loss, {
             "Losses/Policy Loss": abs(policy_term.item()),
             "Losses/Value Loss": value_term.item(),
-            "Policy/Entropy": entropy.mean().item(),
+            "Policy/Entropy": masked_mean(entropy, mask).item(),
         }
 
     def update(self) -> dict[str, float]:
@@ -235,17 +291,24 @@ class PPOTrainer:
         experience = Experience(
             [batch[_obs_key(i)] for i in range(n_obs)],
             [batch[_next_obs_key(i)] for i in range(n_obs)] if self._needs_next_obs else None,
-            batch["continuous_actions"], batch["discrete_actions"])
+            batch["continuous_actions"], batch["discrete_actions"], batch.get("masks"))
         stats: dict[str, float] = {}
         for provider in self.providers.values():
             stats.update(provider.update(experience))
         return stats
 
     def _minibatch_indices(self):
-        """num_epoch shuffles of the buffer (the seeded shuffle generator), cut into full minibatches."""
-        length, batch_size = len(self.buffer), self.hyperparams.batch_size
+        """num_epoch shuffles of the buffer (the seeded shuffle generator), cut into full minibatches.
+
+        With memory the shuffle moves whole sequences and batch_size is rounded down to a multiple
+        of sequence_length (at least one sequence), as in the reference."""
+        length, step = len(self.buffer), self.sequence_length
+        batch_size = max(self.hyperparams.batch_size - self.hyperparams.batch_size % step, step)
+        within = torch.arange(step)
         for _ in range(self.hyperparams.num_epoch):
-            order = torch.randperm(length, generator=self.shuffle_generator)
+            order = torch.randperm(length // step, generator=self.shuffle_generator)
+            if step > 1:
+                order = (order[:, None] * step + within).reshape(-1)
             for start in range(0, (length // batch_size) * batch_size, batch_size):
                 yield order[start:start + batch_size]
 
