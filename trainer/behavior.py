@@ -37,6 +37,7 @@ def hyperparams_from_settings(settings) -> PPOHyperparams:
         epsilon=h.epsilon,
         lambd=h.lambd,
         num_epoch=h.num_epoch,
+        shared_critic=h.shared_critic,
         learning_rate_schedule=h.learning_rate_schedule,
         beta_schedule=h.beta_schedule,
         epsilon_schedule=h.epsilon_schedule,

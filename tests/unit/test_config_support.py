@@ -22,7 +22,7 @@ def test_plain_ppo_config_is_supported(tmp_path):
         behaviors:
           Basic:
             trainer_type: ppo
-            hyperparameters: {shared_critic: false}
+            hyperparameters: {shared_critic: true}
             network_settings: {normalize: true, goal_conditioning_type: none, memory: {memory_size: 8}}
             reward_signals: {extrinsic: {gamma: 0.9}, curiosity: {strength: 0.02}, rnd: {}}
     """)
@@ -47,12 +47,12 @@ def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
             trainer_type: ppo
     """)
     assert [key for key, _ in unsupported(opts.behaviors["Striker"])] == [
-        "hyperparameters.shared_critic", "reward_signals.gail", "behavioral_cloning", "self_play"]
+        "reward_signals.gail", "behavioral_cloning", "self_play"]
     assert unsupported(opts.behaviors["Goalie"]) == []
     with pytest.raises(ConfigError) as info:
         check_supported(opts)
     message = str(info.value)
-    assert message.count("'behaviors.Striker.") == 4 and "Goalie" not in message
+    assert message.count("'behaviors.Striker.") == 3 and "Goalie" not in message
     assert "'behaviors.Striker.self_play': remove the block" in message
 
 

@@ -19,8 +19,6 @@ SUPPORTED_REWARD_SIGNALS = ("extrinsic", "curiosity", "rnd")
 def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
     """(key path inside a behavior block, what to do) for each unsupported feature ``ts`` uses."""
     found = []
-    if ts.hyperparameters.shared_critic:
-        found.append(("hyperparameters.shared_critic", "set it to false (actor and critic are separate)"))
     for name in ts.reward_signals:
         if name not in SUPPORTED_REWARD_SIGNALS:
             found.append((f"reward_signals.{name}",

@@ -25,9 +25,10 @@ from trainer.ppo.networks import Actor, Critic
 
 
 def supports(module: Actor | Critic) -> bool:
-    """Vector observations only, no LSTM (a recurrent network acts and learns in torch)."""
+    """Vector observations only, no LSTM, not a critic on the actor's body (those act and learn
+    in torch: the numpy update's gradients assume separate bodies)."""
     body = module.network_body
-    return body.lstm is None and all(isinstance(e, VectorInput) for e in body.observation_encoder.encoders)
+    return not getattr(module, "shared", False) and body.lstm is None and all(isinstance(e, VectorInput) for e in body.observation_encoder.encoders)
 
 
 class _Tracked:

@@ -28,6 +28,7 @@ class PPOHyperparams:
     epsilon: float = 0.2  # initial PPO clip range (policy ratio and value trust region)
     lambd: float = 0.95  # GAE lambda
     num_epoch: int = 3  # passes over the buffer per update
+    shared_critic: bool = False  # value heads on the actor's body instead of a separate critic
     learning_rate_schedule: str = "linear"  # "linear" decays to 1e-10 over max_steps, "constant" keeps it
     beta_schedule: str = "linear"  # floor 1e-5
     epsilon_schedule: str = "linear"  # floor 0.1

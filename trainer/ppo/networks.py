@@ -191,12 +191,23 @@ class Actor(nn.Module):
 
 
 class Critic(nn.Module):
-    """Value network: own body and normalisers, one Linear(h, 1) head (Xavier uniform) per reward signal."""
+    """Value network: own body and normalisers, one Linear(h, 1) head (Xavier uniform) per reward signal.
+
+    ``shared_body`` (hyperparameters.shared_critic): the heads sit on the actor's body instead. That
+    body is not a submodule here (its weights are the actor's: no second copy in parameters() or
+    the state dict), but value-loss gradients reach it, and ``update_normalization`` updates it
+    too, so with the actor's own update each trajectory enters its normaliser twice, as in the
+    reference (its critic *is* the actor there).
+    """
 
     def __init__(self, observation_specs: Sequence[ObservationSpec], reward_signal_names: Sequence[str],
-                 hyperparams: PPOHyperparams):
+                 hyperparams: PPOHyperparams, shared_body: NetworkBody | None = None):
         super().__init__()
-        self.network_body = NetworkBody(observation_specs, hyperparams)
+        self.shared = shared_body is not None
+        if self.shared:
+            object.__setattr__(self, "network_body", shared_body)  # bypasses submodule registration
+        else:
+            self.network_body = NetworkBody(observation_specs, hyperparams)
         hidden = self.network_body.output_size
         self.value_heads = nn.ModuleDict(
             {name: linear_layer(hidden, 1, XAVIER_UNIFORM, 1.0) for name in reward_signal_names}

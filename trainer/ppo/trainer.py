@@ -66,7 +66,8 @@ class PPOTrainer:
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed + 2)
             self.critic = Critic(
-                behavior_spec.observation_specs, list(hyperparams.reward_signals), hyperparams
+                behavior_spec.observation_specs, list(hyperparams.reward_signals), hyperparams,
+                shared_body=self.policy.actor.network_body if hyperparams.shared_critic else None,
             ).to(self.device)
         trainable = [
             p for p in chain(self.policy.actor.parameters(), self.critic.parameters()) if p.requires_grad
