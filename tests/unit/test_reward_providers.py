@@ -200,3 +200,26 @@ def test_providers_survive_a_checkpoint_and_a_missing_one_starts_fresh(tmp_path,
         fresh.load_state_dict(state)
     assert "no curiosity reward signal" in caplog.text
     assert not fresh.providers["curiosity"].has_updated and fresh.providers["rnd"].optimizer.step_count == 6
+
+
+def test_a_checkpoint_from_before_a_signal_was_added_or_removed_still_loads(caplog):
+    plain = PPOTrainer("Ball", SPEC, replace(HYPER, reward_signals={"extrinsic": (0.9, 1.0)},
+                                             reward_signal_networks={}), seed=0)
+    for seed in range(3):
+        plain.process_trajectory(make_trajectory(plain, 4, False, False, seed=seed))
+    plain.update()
+    grown = PPOTrainer("Ball", SPEC, HYPER, seed=5)
+    untrained_head = grown.critic.value_heads["curiosity"].weight.clone()
+    with caplog.at_level(logging.WARNING, logger="mlagents_like"):
+        grown.load_state_dict(plain.state_dict())
+    assert "reward signals differ from the checkpoint's (curiosity, rnd)" in caplog.text
+    assert torch.equal(grown.critic.value_heads["extrinsic"].weight, plain.critic.value_heads["extrinsic"].weight)
+    assert torch.equal(grown.critic.value_heads["curiosity"].weight, untrained_head)
+    assert grown.step == plain.step and grown.optimizer.step_count == 0  # fresh moments for the new layout
+    shrunk = PPOTrainer("Ball", SPEC, replace(HYPER, reward_signals={"extrinsic": (0.9, 1.0)},
+                                              reward_signal_networks={}), seed=5)
+    shrunk.load_state_dict(grown.state_dict())  # the other way round: extra heads are dropped
+    assert torch.equal(shrunk.critic.value_heads["extrinsic"].weight, plain.critic.value_heads["extrinsic"].weight)
+    wider = PPOTrainer("Ball", SPEC, replace(HYPER, hidden_units=32), seed=5)
+    with pytest.raises(RuntimeError, match="size mismatch"):  # a different network is still refused
+        wider.load_state_dict(grown.state_dict())

@@ -369,8 +369,17 @@ class PPOTrainer:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.policy.actor.load_state_dict(state["Policy"])
-        self.critic.load_state_dict(state["Optimizer:critic"])
-        self.optimizer.load_state_dict(state["Optimizer:value_optimizer"])
+        critic_state, own = state["Optimizer:critic"], self.critic.state_dict()
+        changed = set(own) ^ set(critic_state)
+        if changed and all(key.startswith("value_heads.") for key in changed):
+            # reward signals were added or removed since the checkpoint: keep everything else
+            signals = sorted({key.split(".")[1] for key in changed})
+            self.critic.load_state_dict({k: v for k, v in critic_state.items() if k in own}, strict=False)
+            logger.warning("The reward signals differ from the checkpoint's (%s): value heads of new signals "
+                           "and the optimizer's moments start fresh.", ", ".join(signals))
+        else:
+            self.critic.load_state_dict(critic_state)
+            self.optimizer.load_state_dict(state["Optimizer:value_optimizer"])
         self.step = int(state["global_step"]["step"])
         for name, provider in self.providers.items():
             keys = provider.state_dict().keys()
