@@ -202,3 +202,33 @@ def test_a_reset_forgets_the_unfinished_episodes():
     assert set(trainer._critic_memory) == {"a"}
     trainer.forget_episodes()
     assert trainer._critic_memory == {} and trainer._episode_intrinsic == {}
+
+
+def test_numpy_acting_steps_the_lstm_like_torch():
+    fast, slow = Policy(SPEC, HYPER, seed=2), Policy(SPEC, HYPER, seed=2)
+    assert fast._numpy_actor is not None
+    slow._numpy_actor = None  # the torch path
+    rng = np.random.default_rng(3)
+    memory_fast = memory_slow = np.zeros((4, 6), np.float32)
+    for _ in range(6):  # memories fed back (deterministic: the two paths sample discrete actions differently)
+        obs, mask = rng.normal(size=(4, 3)).astype(np.float32), rng.random((4, 3)) < 0.3
+        mask[:, 0] = False
+        a = fast.act([obs], mask, deterministic=True, memories=memory_fast)
+        b = slow.act([obs], mask, deterministic=True, memories=memory_slow)
+        np.testing.assert_allclose(a.memories, b.memories, atol=1e-5)
+        np.testing.assert_allclose(a.continuous_raw, b.continuous_raw, atol=1e-5)
+        np.testing.assert_array_equal(a.discrete, b.discrete)
+        np.testing.assert_allclose(a.log_probs, b.log_probs, atol=1e-5)
+        memory_fast, memory_slow = a.memories, b.memories
+
+
+def test_numpy_and_torch_critics_value_sequences_alike():
+    fast, slow = (PPOTrainer("Ball", SPEC, HYPER, seed=0) for _ in range(2))
+    assert fast._numpy_critic is not None
+    slow._numpy_critic = None
+    for trainer in (fast, slow):
+        for seed, (length, done) in enumerate([(7, False), (5, False), (2, True)]):
+            trainer.process_trajectory(trajectory(trainer.policy, length, done, "a", seed))
+    a, b = fast.buffer.concatenated(), slow.buffer.concatenated()
+    for key in ("values:extrinsic", "returns:extrinsic", "critic_memory", "advantages"):
+        np.testing.assert_allclose(a[key], b[key], atol=1e-5)

@@ -30,7 +30,7 @@ def test_hybrid_heads_match_torch_and_follow_updates():
     allowed = np.ones((7, 5), np.float32)
     allowed[:, 1] = 0.0
     for round_ in range(3):
-        mu, logits = fast.heads(obs, allowed)
+        mu, logits, _ = fast.heads(obs, allowed)
         t_mu, t_logits = torch_heads(actor, obs, allowed)
         np.testing.assert_allclose(mu, t_mu, rtol=1e-5, atol=1e-6)
         for a, b in zip(logits, t_logits):
@@ -51,16 +51,16 @@ def test_normaliser_updates_refresh_only_the_normalisers():
     actor = Actor((vec(3),), ActionSpec(2, ()), HP)
     fast = NumpyActor(actor)
     obs = [np.array([[1.0, -2.0, 0.5], [4.0, 3.0, -1.0]], np.float32)]
-    before, _ = fast.heads(obs, None)
+    before, _, _ = fast.heads(obs, None)
     layers = fast.layers
     actor.update_normalization([torch.from_numpy(obs[0] * 10)])
-    after, _ = fast.heads(obs, None)
+    after, _, _ = fast.heads(obs, None)
     np.testing.assert_allclose(after, torch_heads(actor, obs, None)[0], rtol=1e-5, atol=1e-6)
     assert not np.allclose(before, after)
     assert fast.layers is layers  # weights untouched: no copy
     with torch.no_grad():
         actor.network_body.hidden[0].weight.add_(0.1)
-    moved, _ = fast.heads(obs, None)
+    moved, _, _ = fast.heads(obs, None)
     assert fast.layers is not layers
     np.testing.assert_allclose(moved, torch_heads(actor, obs, None)[0], rtol=1e-5, atol=1e-6)
 
@@ -70,9 +70,9 @@ def test_load_state_dict_is_seen_and_visual_actors_are_not_supported():
     a, b = Actor((vec(4),), ActionSpec(1, ()), HP), Actor((vec(4),), ActionSpec(1, ()), HP)
     fast = NumpyActor(a)
     obs = [np.ones((2, 4), np.float32)]
-    before, _ = fast.heads(obs, None)
+    before, _, _ = fast.heads(obs, None)
     a.load_state_dict(b.state_dict())
-    after, _ = fast.heads(obs, None)
+    after, _, _ = fast.heads(obs, None)
     np.testing.assert_allclose(after, torch_heads(b, obs, None)[0], rtol=1e-5, atol=1e-6)
     assert not np.allclose(before, after)
     visual = ObservationSpec((3, 36, 36), (DimensionProperty.NONE, DimensionProperty.TRANSLATIONAL_EQUIVARIANCE,

@@ -64,7 +64,7 @@ def test_numpy_steps_match_autograd_and_adam(action_spec, masked):
     obs = [np.ones((4, 5), np.float32), np.zeros((4, 3), np.float32)]
     with torch.no_grad():
         mu, logits = fast.policy.actor.heads([torch.from_numpy(o) for o in obs], None)
-    fast_mu, fast_logits = fast.policy._numpy_actor.heads(obs, None)
+    fast_mu, fast_logits, _ = fast.policy._numpy_actor.heads(obs, None)
     if mu is not None:
         np.testing.assert_allclose(fast_mu, mu.numpy(), rtol=1e-5, atol=1e-6)
     for x, y in zip(fast_logits, logits):

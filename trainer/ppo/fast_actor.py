@@ -24,11 +24,13 @@ from trainer.ppo.encoders import VectorInput
 from trainer.ppo.networks import Actor, Critic
 
 
-def supports(module: Actor | Critic) -> bool:
-    """Vector observations only, no LSTM, not a critic on the actor's body (those act and learn
-    in torch: the numpy update's gradients assume separate bodies)."""
+def supports(module: Actor | Critic, recurrent: bool = False) -> bool:
+    """Vector observations only, not a critic on the actor's body (the numpy update's gradients
+    assume separate bodies), and no LSTM unless ``recurrent`` (forward passes step the LSTM in
+    numpy; the numpy update does not train one)."""
     body = module.network_body
-    return not getattr(module, "shared", False) and body.lstm is None and all(isinstance(e, VectorInput) for e in body.observation_encoder.encoders)
+    return (not getattr(module, "shared", False) and (recurrent or body.lstm is None)
+            and all(isinstance(e, VectorInput) for e in body.observation_encoder.encoders))
 
 
 class _Tracked:
@@ -104,7 +106,7 @@ class _NumpyCopy:
     weights re-copied when a parameter changed, normaliser mean/std when a buffer changed."""
 
     def __init__(self, module: Actor | Critic) -> None:
-        if not supports(module):
+        if not supports(module, recurrent=True):
             raise ValueError(f"{type(self).__name__} handles vector observations only")
         self.module = module
         self._weights = _Tracked(module.parameters())
@@ -117,10 +119,43 @@ class _NumpyCopy:
         """Refresh what changed, then the last hidden layer's output [n, hidden]."""
         if self._weights.stale():
             self.layers = body_layers(self.module.network_body)
+            self.lstm = lstm_weights(self.module.network_body)
             self._copy_heads()
         if self._normalizers.stale():
             self.normalizers = body_normalizers(self.module.network_body)
         return body_forward(obs, self.normalizers, self.layers)
+
+    def _hidden_memory(self, obs: list[np.ndarray], memories: np.ndarray, sequence_length: int = 1
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """A recurrent body: rows are sequences of ``sequence_length`` steps starting from
+        memories [n_seq, m] -> (LSTM outputs [rows, m/2], memories after each sequence [n_seq, m])."""
+        h = self._hidden(obs)
+        w_in, w_hidden, bias = self.lstm
+        size = w_hidden.shape[0]
+        inputs = (h @ w_in + bias).reshape(-1, sequence_length, 4 * size)  # the input part of every gate
+        state, cell = memories[:, :size].astype(np.float32), memories[:, size:].astype(np.float32)
+        outputs = np.empty((inputs.shape[0], sequence_length, size), dtype=np.float32)
+        for t in range(sequence_length):
+            gates = inputs[:, t] + state @ w_hidden
+            i, f, g, o = (gates[:, k * size:(k + 1) * size] for k in range(4))  # torch's gate order
+            cell = _sigmoid(f) * cell + _sigmoid(i) * np.tanh(g)
+            state = _sigmoid(o) * np.tanh(cell)
+            outputs[:, t] = state
+        return outputs.reshape(-1, size), np.concatenate([state, cell], axis=1)
+
+
+def _sigmoid(x: np.ndarray) -> np.ndarray:
+    return 1.0 / (1.0 + np.exp(-x))
+
+
+def lstm_weights(network_body) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(W_ih^T [in, 4h], W_hh^T [h, 4h], b_ih + b_hh [4h]) of the body's LSTM, or None."""
+    if network_body.lstm is None:
+        return None
+    lstm = network_body.lstm.lstm
+    with torch.no_grad():
+        return (lstm.weight_ih_l0.numpy().T.copy(), lstm.weight_hh_l0.numpy().T.copy(),
+                (lstm.bias_ih_l0 + lstm.bias_hh_l0).numpy().copy())
 
 
 class NumpyCritic(_NumpyCopy):
@@ -133,6 +168,12 @@ class NumpyCritic(_NumpyCopy):
         """Value estimates per reward signal, float32 [n] each."""
         h = self._hidden(obs)
         return {name: (h @ weight + bias)[:, 0] for name, (weight, bias) in self.heads.items()}
+
+    def with_memory(self, obs: list[np.ndarray], memories: np.ndarray, sequence_length: int
+                    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """A recurrent critic: (values per signal [rows], memories after each sequence [n_seq, m])."""
+        h, memories = self._hidden_memory(obs, memories, sequence_length)
+        return {name: (h @ weight + bias)[:, 0] for name, (weight, bias) in self.heads.items()}, memories
 
 
 class NumpyActor(_NumpyCopy):
@@ -149,10 +190,17 @@ class NumpyActor(_NumpyCopy):
         self.branches = [_linear(b) for b in actor.discrete_branches]
         self.offsets = list(actor._mask_offsets)
 
-    def heads(self, obs: list[np.ndarray], allowed: np.ndarray | None
-              ) -> tuple[np.ndarray | None, list[np.ndarray]]:
-        """mu [n, c] or None, and masked logits [n, k_b] per branch (allowed: float [n, sum], 1 = allowed)."""
-        h = self._hidden(obs)
+    def heads(self, obs: list[np.ndarray], allowed: np.ndarray | None, memories: np.ndarray | None = None
+              ) -> tuple[np.ndarray | None, list[np.ndarray], np.ndarray | None]:
+        """mu [n, c] or None, masked logits [n, k_b] per branch (allowed: float [n, sum], 1 = allowed),
+        and for a recurrent actor the next memories [n, m] (from ``memories``, zero if None)."""
+        memories_out = None
+        if self.module.network_body.lstm is not None:
+            if memories is None:
+                memories = np.zeros((len(obs[0]), self.module.network_body.memory_size), dtype=np.float32)
+            h, memories_out = self._hidden_memory(obs, memories, 1)
+        else:
+            h = self._hidden(obs)
         mu = h @ self.mu[0] + self.mu[1] if self.mu is not None else None
         logits = []
         for index, (weight, bias) in enumerate(self.branches):
@@ -161,4 +209,4 @@ class NumpyActor(_NumpyCopy):
                 a = allowed[:, self.offsets[index]:self.offsets[index + 1]]
                 branch = branch * a - 1e8 * (1.0 - a)
             logits.append(branch)
-        return mu, logits
+        return mu, logits, memories_out

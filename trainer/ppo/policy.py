@@ -61,7 +61,7 @@ class Policy:
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(seed + 1)
         # vector-only actors on the CPU decide in numpy (see fast_actor for why)
-        use_numpy = self.device.type == "cpu" and fast_actor.supports(self.actor)
+        use_numpy = self.device.type == "cpu" and fast_actor.supports(self.actor, recurrent=True)
         self.memory_size = hyperparams.memory_size  # > 0: act takes and returns each agent's memory
         self._numpy_actor = fast_actor.NumpyActor(self.actor) if use_numpy else None
 
@@ -78,7 +78,7 @@ class Policy:
         """
         deterministic = deterministic or self.hyperparams.deterministic
         if self._numpy_actor is not None:
-            return self._act_numpy(obs, action_mask, deterministic)
+            return self._act_numpy(obs, action_mask, deterministic, memories)
         allowed = allowed_from_mask(action_mask)
         with torch.inference_mode():
             tensors = self._to_tensors(obs)
@@ -130,10 +130,10 @@ class Policy:
         )
 
     def _act_numpy(self, obs: Sequence[np.ndarray], action_mask: np.ndarray | None,
-                   deterministic: bool) -> PolicyOutput:
+                   deterministic: bool, memories: np.ndarray | None = None) -> PolicyOutput:
         """``act`` in numpy: same distributions, noise drawn from the same torch generator."""
         allowed = None if action_mask is None else np.logical_not(action_mask).astype(np.float32)
-        mu, logits = self._numpy_actor.heads(list(obs), allowed)
+        mu, logits, memories_out = self._numpy_actor.heads(list(obs), allowed, memories)
         n = len(obs[0])
         log_parts: list[np.ndarray] = []
         entropy = np.zeros(n, dtype=np.float32)
@@ -177,6 +177,7 @@ class Policy:
             discrete=discrete,
             log_probs=log_probs.astype(np.float32),
             entropy=entropy.astype(np.float32),
+            memories=memories_out,
         )
 
     def evaluate(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None,

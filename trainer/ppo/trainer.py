@@ -80,7 +80,7 @@ class PPOTrainer:
         # LSTM: experiences train in sequences of this length; the critic's memory at the end of an
         # episode's last trajectory is where its next trajectory starts
         self.sequence_length = hyperparams.sequence_length if hyperparams.memory_size else 1
-        self._critic_memory: dict[Any, torch.Tensor] = {}
+        self._critic_memory: dict[Any, np.ndarray] = {}  # episode -> float32 [memory_size]
         self.shuffle_generator = torch.Generator()
         self.shuffle_generator.manual_seed(seed + 3)
         self.buffer = UpdateBuffer()
@@ -90,7 +90,7 @@ class PPOTrainer:
         self.numpy_update = os.environ.get("MLAGENTS_LIKE_NUMPY_UPDATE", "1") != "0"
         # value estimates of vector-observation critics in numpy: no per-trajectory torch op overhead
         self._numpy_critic = NumpyCritic(self.critic) if (
-            fast_actor.supports(self.critic) and self.device.type == "cpu") else None
+            fast_actor.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays: list[np.ndarray]) -> list[torch.Tensor]:
@@ -114,27 +114,38 @@ class PPOTrainer:
         ``sequence_length`` from the start, then the rest), its memory carried on from the agent's
         previous trajectory. Returns (values [T] per signal, V(next) per signal, the critic memory
         each step's sequence starts from [T, m])."""
-        length, step = len(traj), self.sequence_length
+        length, step, size = len(traj), self.sequence_length, self.hyperparams.memory_size
         memory = self._critic_memory.pop(traj.episode, None)
-        if memory is None:
-            memory = torch.zeros((1, 1, self.hyperparams.memory_size), device=self.device)
-        obs = self._tensors(traj.obs)
-        starts = np.zeros((length, self.hyperparams.memory_size), dtype=np.float32)
-        parts: dict[str, list[torch.Tensor]] = {}
+        memory = np.zeros((1, size), np.float32) if memory is None else memory[None]
+        starts = np.zeros((length, size), dtype=np.float32)
+        parts: dict[str, list[np.ndarray]] = {}
         bounds = list(range(0, length - length % step, step)) + ([length - length % step] if length % step else [])
-        with torch.inference_mode():
-            for begin in bounds:
-                end = min(begin + step, length)
-                starts[begin:end] = memory[0, 0].cpu().numpy()
-                values, memory = self.critic.forward_memory([o[begin:end] for o in obs], memory, end - begin)
+        chunks = [(begin, min(begin + step, length)) for begin in bounds] + [(None, None)]  # last: next_obs
+        for begin, end in chunks:
+            obs = [n[None] for n in traj.next_obs] if begin is None else [o[begin:end] for o in traj.obs]
+            if begin is not None:
+                starts[begin:end] = memory[0]
+            values, after = self._critic_with_memory(obs, memory)
+            if begin is None:
+                next_values = {name: float(v[0]) for name, v in values.items()}
+            else:
+                memory = after
                 for name, v in values.items():
                     parts.setdefault(name, []).append(v)
-            next_obs = self._tensors([n[None] for n in traj.next_obs])
-            next_values, _ = self.critic.forward_memory(next_obs, memory, 1)
         if not traj.done:
-            self._critic_memory[traj.episode] = memory
-        return ({name: torch.cat(v).cpu().numpy() for name, v in parts.items()},
-                {name: float(v[0]) for name, v in next_values.items()}, starts)
+            self._critic_memory[traj.episode] = memory[0]
+        return {name: np.concatenate(v) for name, v in parts.items()}, next_values, starts
+
+    def _critic_with_memory(self, obs: list[np.ndarray], memory: np.ndarray
+                            ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """One sequence (all rows of ``obs``) through the recurrent critic from memory [1, m]:
+        (values [rows] per signal, the memory after it [1, m]); numpy when it can."""
+        if self._numpy_critic is not None:
+            return self._numpy_critic.with_memory(obs, memory, len(obs[0]))
+        with torch.inference_mode():
+            values, after = self.critic.forward_memory(
+                self._tensors(obs), torch.as_tensor(memory, device=self.device)[None], len(obs[0]))
+        return {name: v.cpu().numpy() for name, v in values.items()}, after[0].cpu().numpy()
 
     def process_trajectory(self, traj: Trajectory) -> dict[str, float]:
         """Normalise, estimate values, compute GAE per reward signal, and buffer the experiences."""
