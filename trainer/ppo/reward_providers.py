@@ -49,9 +49,9 @@ def _body_hyperparams(base: PPOHyperparams, network: SignalNetwork) -> PPOHyperp
                                memory_size=0)  # the reference ignores memory in these encoders
 
 
-def _tensors(arrays: Sequence[Any]) -> list[torch.Tensor]:
-    return [torch.as_tensor(np.asarray(a, dtype=np.float32)) if not isinstance(a, torch.Tensor)
-            else a.float() for a in arrays]
+def _tensor(array: Any, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    """A numpy array or a tensor (PPO minibatches come as either) as a tensor of ``dtype``."""
+    return array.to(dtype) if isinstance(array, torch.Tensor) else torch.as_tensor(np.asarray(array), dtype=dtype)
 
 
 def _one_hot(discrete: torch.Tensor, branches: Sequence[int]) -> torch.Tensor:
@@ -66,14 +66,11 @@ class Experience:
     recurrent minibatches the masks [n] that are 0 on sequence padding."""
 
     def __init__(self, obs, next_obs, continuous, discrete, masks=None) -> None:
-        self.masks = None if masks is None else torch.as_tensor(np.asarray(masks, np.float32)) if not isinstance(
-            masks, torch.Tensor) else masks.float()
-        self.obs = _tensors(obs)
-        self.next_obs = _tensors(next_obs) if next_obs is not None else None
-        self.continuous = torch.as_tensor(np.asarray(continuous, np.float32)) if not isinstance(
-            continuous, torch.Tensor) else continuous.float()
-        self.discrete = torch.as_tensor(np.asarray(discrete)) if not isinstance(
-            discrete, torch.Tensor) else discrete
+        self.obs = [_tensor(o) for o in obs]
+        self.next_obs = None if next_obs is None else [_tensor(o) for o in next_obs]
+        self.continuous = _tensor(continuous)
+        self.discrete = _tensor(discrete, torch.int64)
+        self.masks = None if masks is None else _tensor(masks)
 
 
 class CuriosityNetwork(nn.Module):
