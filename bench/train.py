@@ -41,6 +41,7 @@ import platform
 import re
 import resource
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -261,6 +262,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--out", type=Path, default=REPO / "bench" / "out")
     parser.add_argument("--timeout", type=float, default=3600.0, help="per trainer, seconds")
+    parser.add_argument("--pairs", type=int, default=1,
+                        help="run N pairs, alternating which trainer goes first, and report every pair's "
+                             "ratio and their median (this machine's speed drifts between runs)")
     return parser.parse_args(argv)
 
 
@@ -274,22 +278,38 @@ def main(argv: list[str] | None = None) -> int:
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)  # neither trainer may see the other's packages
     args.out.mkdir(parents=True, exist_ok=True)
+    pairs = []
     with tempfile.TemporaryDirectory(prefix=f"bench_train_{args.task}_") as tmp:
         folder = Path(tmp)
         config_path = folder / source.name
         config = write_bench_config(source, config_path, args.max_steps)
         behavior = next(iter(config["behaviors"]))
-        ours = train("ours", OUR_LEARN, f"stub:{args.task}", config_path, folder / "ours",
-                     args, behavior, env)
         exe = stub_launcher(folder, args.task)
-        reference = train("reference", REFERENCE_LEARN, str(exe.with_suffix("")), config_path,
-                          folder / "reference", args, behavior, env)
-    verdict = compare(ours, reference)
-    print(markdown(args.task, ours, reference, verdict))
+        for index in range(max(1, args.pairs)):
+            pair_folder = folder / f"pair{index}" if args.pairs > 1 else folder
+            runs = {
+                "ours": lambda f=pair_folder: train("ours", OUR_LEARN, f"stub:{args.task}", config_path,
+                                                    f / "ours", args, behavior, env),
+                "reference": lambda f=pair_folder: train("reference", REFERENCE_LEARN, str(exe.with_suffix("")),
+                                                         config_path, f / "reference", args, behavior, env),
+            }
+            order = ["ours", "reference"] if index % 2 == 0 else ["reference", "ours"]
+            done = {name: runs[name]() for name in order}
+            verdict = compare(done["ours"], done["reference"])
+            print(markdown(args.task, done["ours"], done["reference"], verdict))
+            pairs.append({"order": order, "ours": done["ours"], "reference": done["reference"],
+                          "verdict": verdict})
+    ours, reference, verdict = pairs[-1]["ours"], pairs[-1]["reference"], pairs[-1]["verdict"]
+    if len(pairs) > 1:
+        ratios = sorted(p["verdict"]["speedup_agent_steps_per_s"] for p in pairs)
+        median = statistics.median(ratios)
+        print(f"\n{len(pairs)} pairs, speed ratios (agent-steps/s): "
+              + ", ".join(f"{r:.2f}x" for r in ratios) + f"; median {median:.2f}x "
+              f"(target >= {TARGET_SPEEDUP:g}x)")
     args.out.mkdir(parents=True, exist_ok=True)
     report = {"task": args.task, "config": str(source), "bench_config": config,
               "seed": args.seed, "num_areas": args.num_areas, "ours": ours,
-              "reference": reference, "verdict": verdict,
+              "reference": reference, "verdict": verdict, "pairs": pairs,
               "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                           "loadavg_at_end": os.getloadavg()}}
     out_path = args.out / f"train_{args.task}.json"
