@@ -34,13 +34,10 @@ def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
 def check_supported(options: RunOptions) -> None:
     """ConfigError listing every unsupported feature of every behavior block (default_settings
     included: it applies to behaviors the YAML does not name)."""
-    blocks = dict(options.behaviors)
+    blocks = {f"behaviors.{name}": ts for name, ts in options.behaviors.items()}
     if options.default_settings is not None:
-        blocks = {**{"default_settings": options.default_settings}, **blocks}
-    problems = []
-    for name, ts in blocks.items():
-        prefix = name if name == "default_settings" else f"behaviors.{name}"
-        problems += [f"'{prefix}.{key}': {advice}" for key, advice in unsupported(ts)]
+        blocks = {"default_settings": options.default_settings, **blocks}
+    problems = [f"'{prefix}.{key}': {advice}" for prefix, ts in blocks.items() for key, advice in unsupported(ts)]
     if problems:
         raise ConfigError(
             "this configuration uses features mlagents-like-learn does not support yet, so it "

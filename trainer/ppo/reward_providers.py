@@ -36,7 +36,6 @@ from trainer.ppo.losses import masked_mean
 from trainer.ppo.networks import NetworkBody
 from trainer.protocol.types import ActionSpec, BehaviorSpec
 
-INTRINSIC_SIGNALS = ("curiosity", "rnd")
 CURIOSITY_HIDDEN = 256  # the inverse and forward models' hidden width (fixed in the reference)
 FORWARD_WEIGHT = 0.2  # loss = LOSS_MULTIPLIER * (0.2 forward + 0.8 inverse)
 LOSS_MULTIPLIER = 10.0
@@ -126,9 +125,8 @@ class CuriosityNetwork(nn.Module):
 
 
 class CuriosityProvider:
-    name = "curiosity"
     stat_name = "Curiosity"
-    ignore_done = True
+    ignore_done = True  # returns bootstrap through the end of an episode
     needs_next_obs = True
 
     def __init__(self, spec: BehaviorSpec, hyperparams: PPOHyperparams, strength: float,
@@ -148,7 +146,7 @@ class CuriosityProvider:
 
     def update(self, exp: Experience) -> dict[str, float]:
         self.has_updated = True
-        forward = masked_mean(self.network.forward_error(exp), exp.masks)  # RND, like the reference, does not mask
+        forward = masked_mean(self.network.forward_error(exp), exp.masks)
         inverse = self.network.inverse_loss(exp)
         loss = LOSS_MULTIPLIER * (FORWARD_WEIGHT * forward + (1.0 - FORWARD_WEIGHT) * inverse)
         self.optimizer.zero_grad()
@@ -169,7 +167,6 @@ class CuriosityProvider:
 
 
 class RNDProvider:
-    name = "rnd"
     stat_name = "Rnd"  # the reference capitalises its class name "RND"
     ignore_done = True
     needs_next_obs = False
@@ -198,7 +195,7 @@ class RNDProvider:
             return self._error(exp).numpy().astype(np.float32)
 
     def update(self, exp: Experience) -> dict[str, float]:
-        loss = torch.mean(self._error(exp))
+        loss = torch.mean(self._error(exp))  # over padding rows too: the reference's RND does not mask
         self.optimizer.zero_grad()
         loss.backward()
         self.optimizer.step()

@@ -119,19 +119,14 @@ class PPOTrainer:
         memory = np.zeros((1, size), np.float32) if memory is None else memory[None]
         starts = np.zeros((length, size), dtype=np.float32)
         parts: dict[str, list[np.ndarray]] = {}
-        bounds = list(range(0, length - length % step, step)) + ([length - length % step] if length % step else [])
-        chunks = [(begin, min(begin + step, length)) for begin in bounds] + [(None, None)]  # last: next_obs
-        for begin, end in chunks:
-            obs = [n[None] for n in traj.next_obs] if begin is None else [o[begin:end] for o in traj.obs]
-            if begin is not None:
-                starts[begin:end] = memory[0]
-            values, after = self._critic_with_memory(obs, memory)
-            if begin is None:
-                next_values = {name: float(v[0]) for name, v in values.items()}
-            else:
-                memory = after
-                for name, v in values.items():
-                    parts.setdefault(name, []).append(v)
+        for begin in range(0, length, step):  # the last sequence may be short
+            end = min(begin + step, length)
+            starts[begin:end] = memory[0]
+            values, memory = self._critic_with_memory([o[begin:end] for o in traj.obs], memory)
+            for name, v in values.items():
+                parts.setdefault(name, []).append(v)
+        next_values, _ = self._critic_with_memory([n[None] for n in traj.next_obs], memory)
+        next_values = {name: float(v[0]) for name, v in next_values.items()}
         if not traj.done:
             self._critic_memory[traj.episode] = memory[0]
         return {name: np.concatenate(v) for name, v in parts.items()}, next_values, starts
@@ -179,7 +174,7 @@ class PPOTrainer:
                 bootstrap = 0.0 if terminal else next_values[name]
             else:
                 rewards = provider.evaluate(experience) * np.float32(strength)
-                bootstrap = next_values[name]  # intrinsic rewards ignore done: always bootstrap
+                bootstrap = next_values[name] if provider.ignore_done or not terminal else 0.0
                 sums = self._episode_intrinsic.setdefault(traj.episode, {})
                 sums[name] = sums.get(name, 0.0) + float(np.sum(rewards))
                 if traj.done:
@@ -334,8 +329,10 @@ class PPOTrainer:
             data["allowed"] = (~masks).astype(np.float32)
         n_obs = len(self.behavior_spec.observation_specs)
         obs = [data.pop(_obs_key(i)) for i in range(n_obs)]
-        provider_columns = {k: data.pop(k) for k in [_next_obs_key(i) for i in range(n_obs)] if k in data}
-        provider_columns.update({_obs_key(i): o for i, o in enumerate(obs)} if self.providers else {})
+        provider_columns = {}  # what only curiosity / rnd read: not indexed per minibatch without them
+        if self.providers:
+            provider_columns = {_obs_key(i): o for i, o in enumerate(obs)}
+            provider_columns.update({k: data.pop(k) for k in [_next_obs_key(i) for i in range(n_obs)] if k in data})
         stepper = numpy_update.NumpyPPO(self)
         actor_in, critic_in = stepper.prepare(obs)
         try:
