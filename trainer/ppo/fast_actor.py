@@ -166,14 +166,16 @@ class NumpyCritic(_NumpyCopy):
 
     def __call__(self, obs: list[np.ndarray]) -> dict[str, np.ndarray]:
         """Value estimates per reward signal, float32 [n] each."""
-        h = self._hidden(obs)
-        return {name: (h @ weight + bias)[:, 0] for name, (weight, bias) in self.heads.items()}
+        return self._values(self._hidden(obs))
 
     def with_memory(self, obs: list[np.ndarray], memories: np.ndarray, sequence_length: int
                     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
         """A recurrent critic: (values per signal [rows], memories after each sequence [n_seq, m])."""
         h, memories = self._hidden_memory(obs, memories, sequence_length)
-        return {name: (h @ weight + bias)[:, 0] for name, (weight, bias) in self.heads.items()}, memories
+        return self._values(h), memories
+
+    def _values(self, h: np.ndarray) -> dict[str, np.ndarray]:
+        return {name: (h @ weight + bias)[:, 0] for name, (weight, bias) in self.heads.items()}
 
 
 class NumpyActor(_NumpyCopy):

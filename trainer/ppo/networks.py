@@ -25,7 +25,7 @@ MODEL_EXPORT_VERSION = 3
 
 def check_network_settings(hyperparams: PPOHyperparams) -> None:
     if hyperparams.memory_size % 2 or hyperparams.memory_size < 0:
-        raise ConfigError(f"network_settings.memory.memory_size must be even and > 0, got {hyperparams.memory_size}")
+        raise ConfigError(f"network_settings.memory.memory_size must be even, got {hyperparams.memory_size}")
 
 
 class LSTMMemory(nn.Module):
@@ -116,7 +116,7 @@ class NetworkBody(nn.Module):
                        sequence_length: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
         """Rows are n_seq sequences of ``sequence_length`` consecutive steps; memories
         [1, n_seq, m] is each sequence's start. -> (encoding [rows, m/2], memories [1, n_seq, m])."""
-        encoding = self.hidden(self.observation_encoder(observations))
+        encoding = self.forward(observations)
         encoding = encoding.reshape(-1, sequence_length, encoding.shape[-1])
         encoding, memories = self.lstm(encoding, memories)
         return encoding.reshape(-1, self.memory_size // 2), memories
@@ -215,14 +215,16 @@ class Critic(nn.Module):
 
     def forward(self, observations: Sequence[torch.Tensor]) -> dict[str, torch.Tensor]:
         """Value estimates per reward signal, each [n]."""
-        encoding = self.network_body(observations)
-        return {name: head(encoding).squeeze(1) for name, head in self.value_heads.items()}
+        return self._values(self.network_body(observations))
 
     def forward_memory(self, observations: Sequence[torch.Tensor], memories: torch.Tensor,
                        sequence_length: int = 1) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
         """``forward`` of a recurrent critic (see NetworkBody.forward_memory), plus the new memories."""
         encoding, memories = self.network_body.forward_memory(observations, memories, sequence_length)
-        return {name: head(encoding).squeeze(1) for name, head in self.value_heads.items()}, memories
+        return self._values(encoding), memories
+
+    def _values(self, encoding: torch.Tensor) -> dict[str, torch.Tensor]:
+        return {name: head(encoding).squeeze(1) for name, head in self.value_heads.items()}
 
     def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:
         self.network_body.update_normalization(observations)
