@@ -46,6 +46,18 @@ def test_the_trainers_stub_task_list_is_the_stubs():
     assert sorted(TASK_NAMES) == sorted(TASKS)
 
 
+def test_checking_a_stub_task_name_does_not_import_mujoco():
+    """The trainer checks --env stub:TASK before launching; MuJoCo's import (~0.3 s) belongs
+    to the stub process, not to the trainer's start-up."""
+    import subprocess
+
+    probe = ("import sys; from trainer.envs.launcher import resolve_env_path; "
+             "resolve_env_path('stub:ball3d'); import unity_stub_env; "
+             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('mujoco', 'unity_stub_env')))")
+    loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
+    assert loaded.strip() == "['unity_stub_env', 'unity_stub_env.task_names']"
+
+
 @pytest.mark.parametrize("given", ["Game", "Game.x86_64", "Game.exe", "Game.app", "Game.x86"])
 def test_linux_prefers_x86_64_whatever_suffix_was_given(tmp_path, given):
     expected = _make_file(tmp_path / "Game.x86_64")
