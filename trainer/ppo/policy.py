@@ -5,8 +5,9 @@ the environment receives clamp(a, -3, 3) / 3. Discrete actions are a multinomial
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Sequence
+import functools
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
 
 import numpy as np
 import torch
@@ -25,6 +26,20 @@ from trainer.ppo.networks import Actor
 from trainer.protocol.types import ActionTuple, BehaviorSpec
 
 CONTINUOUS_CLIP = 3.0
+_HALF_LOG_2PI = 0.5 * np.log(2 * np.pi)  # a float64 scalar: the Gaussian terms in float64, as before
+_MAX, _SUM = np.maximum.reduce, np.add.reduce  # ndarray.max/sum without their Python wrappers
+
+
+def _numpy_entropy(n: int, parts: list) -> np.ndarray:
+    """Entropy per agent from ``_act_numpy``'s parts: the Gaussian's mean entropy (a float) and
+    each branch's probabilities [n, k]."""
+    entropy = np.zeros(n, dtype=np.float32)
+    for part in parts:
+        if isinstance(part, np.ndarray):
+            entropy = entropy - (part * np.log(part + EPSILON)).sum(axis=1)
+        else:
+            entropy = entropy + part
+    return entropy.astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -35,8 +50,14 @@ class PolicyOutput:
     continuous_raw: np.ndarray  # float32 [n, c] unclamped samples (stored for log-probs)
     discrete: np.ndarray  # int32 [n, b]
     log_probs: np.ndarray  # float32 [n, c + b], per continuous dimension then per discrete branch
-    entropy: np.ndarray  # float32 [n], mean over Gaussian dims + sum over branches
     memories: np.ndarray | None = None  # float32 [n, memory_size]: each agent's next memory (LSTM only)
+    # computes ``entropy`` when first read: the rollout never reads it, so deciding skips it
+    entropy_of: Callable[[], np.ndarray] | None = field(default=None, repr=False, compare=False)
+
+    @functools.cached_property
+    def entropy(self) -> np.ndarray:
+        """float32 [n]: mean over the Gaussian's dimensions + sum over the discrete branches."""
+        return self.entropy_of()
 
 
 def allowed_from_mask(action_mask: np.ndarray | None) -> torch.Tensor | None:
@@ -125,19 +146,22 @@ class Policy:
             continuous_raw=raw.cpu().numpy(),
             discrete=discrete_np,
             log_probs=log_probs.cpu().numpy(),
-            entropy=entropy.cpu().numpy(),
+            entropy_of=functools.partial(np.asarray, entropy.cpu().numpy()),
             memories=memories_out,
         )
 
     def _act_numpy(self, obs: Sequence[np.ndarray], action_mask: np.ndarray | None,
                    deterministic: bool, memories: np.ndarray | None = None) -> PolicyOutput:
-        """``act`` in numpy: same distributions, noise drawn from the same torch generator."""
+        """``act`` in numpy: same distributions, noise drawn from the same torch generator.
+
+        Runs once per decision step, often for one agent, so it is written for numpy's per-call
+        cost: reductions through the ufuncs (``ndarray.max``/``sum`` add a Python wrapper each),
+        no copies of arrays that already have their dtype."""
         allowed = None if action_mask is None else np.logical_not(action_mask).astype(np.float32)
         mu, logits, memories_out = self._numpy_actor.heads(list(obs), allowed, memories)
         n = len(obs[0])
         log_parts: list[np.ndarray] = []
-        entropy = np.zeros(n, dtype=np.float32)
-        raw = np.zeros((n, 0), dtype=np.float32)
+        entropy_parts: list = []
         if mu is not None:
             sigma, variance_term, log_term, gaussian_entropy_mean = self._numpy_actor.gaussian
             if deterministic:
@@ -145,38 +169,35 @@ class Policy:
             else:
                 noise = torch.randn(mu.shape, generator=self.generator).numpy()
                 raw = mu + noise * sigma
-            log_parts.append(-((raw - mu) ** 2) / variance_term - log_term - 0.5 * np.log(2 * np.pi))
-            entropy = entropy + gaussian_entropy_mean
-        chosen = []
-        rows = np.arange(n)
-        for branch_logits in logits:
-            z = np.exp(branch_logits - branch_logits.max(axis=1, keepdims=True))
-            probs = z / z.sum(axis=1, keepdims=True)
+            log_parts.append(-((raw - mu) ** 2) / variance_term - log_term - _HALF_LOG_2PI)
+            entropy_parts.append(gaussian_entropy_mean)
+            raw = raw.astype(np.float32, copy=False)
+            env_continuous = np.minimum(np.maximum(raw, -CONTINUOUS_CLIP), CONTINUOUS_CLIP) / CONTINUOUS_CLIP
+        else:
+            raw = env_continuous = np.zeros((n, 0), dtype=np.float32)
+        discrete = np.empty((n, len(logits)), dtype=np.int32)
+        rows = np.arange(n) if logits else None
+        for index, branch_logits in enumerate(logits):
+            z = np.exp(branch_logits - _MAX(branch_logits, axis=1, keepdims=True))
+            probs = z / _SUM(z, axis=1, keepdims=True)
             if deterministic:
                 action = probs.argmax(axis=1)
             else:
                 u = torch.rand(n, generator=self.generator).numpy()[:, None]
-                action = (probs.cumsum(axis=1) <= u).sum(axis=1)
+                action = _SUM(probs.cumsum(axis=1) <= u, axis=1)
                 # rounding can push u past the last cumulative sum: take the last allowed option
                 last_allowed = probs.shape[1] - 1 - (probs[:, ::-1] > 0).argmax(axis=1)
                 action = np.minimum(action, last_allowed)
-            chosen.append(action)
-            log_parts.append(np.log(probs[rows, action] + EPSILON)[:, None])
-            entropy = entropy - (probs * np.log(probs + EPSILON)).sum(axis=1)
-        # the same arrays as stacking, clipping and concatenating, without numpy's Python-level
-        # wrappers (a third of a one-agent decision)
-        discrete = np.empty((n, len(chosen)), dtype=np.int32)
-        for index, action in enumerate(chosen):
             discrete[:, index] = action
-        raw = raw.astype(np.float32)
-        env_continuous = np.minimum(np.maximum(raw, -CONTINUOUS_CLIP), CONTINUOUS_CLIP) / CONTINUOUS_CLIP
+            log_parts.append(np.log(probs[rows, action] + EPSILON)[:, None])
+            entropy_parts.append(probs)
         log_probs = log_parts[0] if len(log_parts) == 1 else np.concatenate(log_parts, axis=1)
         return PolicyOutput(
             env_actions=ActionTuple(env_continuous, discrete),
             continuous_raw=raw,
             discrete=discrete,
-            log_probs=log_probs.astype(np.float32),
-            entropy=entropy.astype(np.float32),
+            log_probs=log_probs.astype(np.float32, copy=False),
+            entropy_of=functools.partial(_numpy_entropy, n, entropy_parts),
             memories=memories_out,
         )
 
