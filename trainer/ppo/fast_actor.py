@@ -15,6 +15,8 @@ branch logits = (h W_b^T + b_b) * allowed - 1e8 * (1 - allowed).
 """
 from __future__ import annotations
 
+import operator
+
 import numpy as np
 import torch
 from torch import nn
@@ -22,6 +24,9 @@ from torch import nn
 from trainer.ppo.distributions import EPSILON
 from trainer.ppo.encoders import VectorInput
 from trainer.ppo.networks import Actor, Critic
+
+
+_VERSION = operator.attrgetter("_version")
 
 
 def supports(module: Actor | Critic, recurrent: bool = False) -> bool:
@@ -43,7 +48,7 @@ class _Tracked:
         self._key: tuple | None = None
 
     def stale(self) -> bool:
-        key = tuple(t._version for t in self._tensors)
+        key = tuple(map(_VERSION, self._tensors))
         if key != self._key:
             self._key = key
             return True
@@ -109,6 +114,7 @@ class _NumpyCopy:
         if not supports(module, recurrent=True):
             raise ValueError(f"{type(self).__name__} handles vector observations only")
         self.module = module
+        self.recurrent = module.network_body.lstm is not None  # (nn.Module attribute reads are slow)
         self._weights = _Tracked(module.parameters())
         self._normalizers = _Tracked(module.buffers())
 
@@ -197,7 +203,7 @@ class NumpyActor(_NumpyCopy):
         """mu [n, c] or None, masked logits [n, k_b] per branch (allowed: float [n, sum], 1 = allowed),
         and for a recurrent actor the next memories [n, m] (from ``memories``, zero if None)."""
         memories_out = None
-        if self.module.network_body.lstm is not None:
+        if self.recurrent:
             if memories is None:
                 memories = np.zeros((len(obs[0]), self.module.network_body.memory_size), dtype=np.float32)
             h, memories_out = self._hidden_memory(obs, memories, 1)
