@@ -119,7 +119,7 @@ class AgentTracker:
         keys, slots = self._sorted_index()
         if len(keys) == 0:
             return np.zeros(len(ids), dtype=np.int64), np.zeros(len(ids), dtype=bool)
-        pos = np.searchsorted(keys, ids).clip(max=len(keys) - 1)
+        pos = np.minimum(np.searchsorted(keys, ids), len(keys) - 1)  # (np.clip's wrapper costs more)
         return slots[pos], keys[pos] == ids
 
     def _sorted_index(self) -> tuple[np.ndarray, np.ndarray]:
@@ -196,10 +196,14 @@ class AgentTracker:
         if len(slots) == 0:
             return slots
         has = self.pending[slots]
-        if has.any():
-            s = slots[has]
-            self._record(s, ds.reward[has] + ds.group_reward[has])
-            self.ep_reward[s] += ds.reward[has]
+        pending = np.count_nonzero(has)
+        if pending:
+            if pending == len(slots):  # the usual step: every agent continues, nothing to select
+                s, reward, group_reward = slots, ds.reward, ds.group_reward
+            else:
+                s, reward, group_reward = slots[has], ds.reward[has], ds.group_reward[has]
+            self._record(s, reward + group_reward)
+            self.ep_reward[s] += reward
             self.ep_length[s] += 1
             full = np.nonzero(has & (self.length[slots] >= self.time_horizon))[0]
             for k in full:

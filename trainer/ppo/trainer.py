@@ -184,10 +184,11 @@ class PPOTrainer:
             fields[f"values:{name}"] = values[name]
             fields[f"returns:{name}"] = returns
             stats[f"Policy/{getattr(provider, 'stat_name', name.capitalize())} Value Estimate"] = float(
-                np.mean(values[name]))
+                np.float32(float(np.add.reduce(values[name])) / length))  # np.mean's float32, without its wrapper
         if traj.done:
             self._episode_intrinsic.pop(traj.episode, None)
-        fields["advantages"] = np.mean(np.stack(advantages), axis=0).astype(np.float32)
+        fields["advantages"] = (advantages[0] if len(advantages) == 1  # the mean of one row is that row
+                                else np.mean(np.stack(advantages), axis=0)).astype(np.float32)
         fields["continuous_actions"] = np.asarray(traj.continuous_actions, np.float32).reshape(length, -1)
         fields["discrete_actions"] = np.asarray(traj.discrete_actions, np.int64).reshape(length, -1)
         fields["log_probs"] = np.asarray(traj.log_probs, np.float32).reshape(length, -1)
