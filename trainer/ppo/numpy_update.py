@@ -51,21 +51,33 @@ class _Body:
         self.linears = [m for m in network_body.hidden if isinstance(m, nn.Linear)]
         self.params = [(m.weight.detach().numpy(), m.bias.detach().numpy()) for m in self.linears]
 
+    # The elementwise steps below run in place on fresh arrays (one pass, no temporaries) and
+    # do the same float32 operations, in the same order, as the plain expressions they replace.
     def forward(self, h: np.ndarray) -> tuple[np.ndarray, list]:
         cache = []
         for weight, bias in self.params:
-            a = h @ weight.T + bias
-            s = 1.0 / (1.0 + np.exp(-a))
+            a = h @ weight.T
+            a += bias
+            s = np.negative(a)  # s = 1 / (1 + exp(-a))
+            np.exp(s, out=s)
+            s += 1.0
+            np.reciprocal(s, out=s)
             cache.append((h, a, s))
             h = a * s
         return h, cache
 
     def backward(self, grad_h: np.ndarray, cache: list, grads: dict) -> None:
-        for (weight, _), linear, (h_in, a, s) in zip(reversed(self.params), reversed(self.linears), reversed(cache)):
-            grad_a = grad_h * (s + a * s * (1.0 - s))
+        last = len(cache) - 1
+        for index, ((weight, _), linear, (h_in, a, s)) in enumerate(
+                zip(reversed(self.params), reversed(self.linears), reversed(cache))):
+            grad_a = a * s  # grad_h * (s + a * s * (1 - s))
+            grad_a *= 1.0 - s
+            grad_a += s
+            grad_a *= grad_h
             grads[id(linear.weight)] = grad_a.T @ h_in
-            grads[id(linear.bias)] = grad_a.sum(axis=0)
-            grad_h = grad_a @ weight
+            grads[id(linear.bias)] = np.add.reduce(grad_a, axis=0)
+            if index < last:  # the first layer's input (the observations) needs no gradient
+                grad_h = grad_a @ weight
 
 
 class NumpyPPO:
@@ -91,6 +103,7 @@ class NumpyPPO:
         self.exp_avg = np.concatenate([t.numpy().reshape(-1) for t in optimizer.exp_avg]).astype(np.float32)
         self.exp_avg_sq = np.concatenate([t.numpy().reshape(-1) for t in optimizer.exp_avg_sq]).astype(np.float32)
         self.flat_grad = np.empty_like(self.exp_avg)
+        self._scratch = np.empty_like(self.exp_avg)  # Adam's one temporary
 
     def prepare(self, obs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """Normalised inputs of the whole buffer for the actor and the critic (their statistics
@@ -207,10 +220,17 @@ class NumpyPPO:
         for param, (start, end) in zip(optimizer.params, self.bounds):
             g[start:end] = grads[id(param)].reshape(-1)
         m, v = self.exp_avg, self.exp_avg_sq
-        m += (1 - beta1) * (g - m)
+        step = np.subtract(g, m, out=self._scratch)  # m += (1 - beta1) * (g - m)
+        step *= 1 - beta1
+        m += step
         v *= beta2
-        v += (1 - beta2) * g * g
-        update = m / (np.sqrt(v) / math.sqrt(1 - beta2 ** t) + eps)
+        np.multiply(g, 1 - beta2, out=step)  # v += (1 - beta2) * g * g
+        step *= g
+        v += step
+        update = np.sqrt(v, out=step)  # m / (sqrt(v) / sqrt(1 - beta2^t) + eps)
+        update /= math.sqrt(1 - beta2 ** t)
+        update += eps
+        np.divide(m, update, out=update)
         update *= learning_rate / (1 - beta1 ** t)
         for array, (start, end) in zip(self.param_arrays, self.bounds):
             array -= update[start:end].reshape(array.shape)
