@@ -50,9 +50,9 @@ class PolicyOutput:
     continuous_raw: np.ndarray  # float32 [n, c] unclamped samples (stored for log-probs)
     discrete: np.ndarray  # int32 [n, b]
     log_probs: np.ndarray  # float32 [n, c + b], per continuous dimension then per discrete branch
-    memories: np.ndarray | None = None  # float32 [n, memory_size]: each agent's next memory (LSTM only)
     # computes ``entropy`` when first read: the rollout never reads it, so deciding skips it
-    entropy_of: Callable[[], np.ndarray] | None = field(default=None, repr=False, compare=False)
+    entropy_of: Callable[[], np.ndarray] = field(repr=False, compare=False)
+    memories: np.ndarray | None = None  # float32 [n, memory_size]: each agent's next memory (LSTM only)
 
     @functools.cached_property
     def entropy(self) -> np.ndarray:
@@ -146,7 +146,7 @@ class Policy:
             continuous_raw=raw.cpu().numpy(),
             discrete=discrete_np,
             log_probs=log_probs.cpu().numpy(),
-            entropy_of=functools.partial(np.asarray, entropy.cpu().numpy()),
+            entropy_of=functools.partial(np.asarray, entropy.cpu().numpy()),  # already computed
             memories=memories_out,
         )
 
