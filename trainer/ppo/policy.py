@@ -30,15 +30,14 @@ _HALF_LOG_2PI = 0.5 * np.log(2 * np.pi)  # a float64 scalar: the Gaussian terms 
 _MAX, _SUM = np.maximum.reduce, np.add.reduce  # ndarray.max/sum without their Python wrappers
 
 
-def _numpy_entropy(n: int, parts: list) -> np.ndarray:
-    """Entropy per agent from ``_act_numpy``'s parts: the Gaussian's mean entropy (a float) and
-    each branch's probabilities [n, k]."""
+def _numpy_entropy(n: int, gaussian_mean: float | None, branch_probs: list[np.ndarray]) -> np.ndarray:
+    """float32 [n]: the Gaussian's mean entropy over its dimensions (None without continuous
+    actions) plus each discrete branch's entropy, from ``_act_numpy``'s probabilities [n, k]."""
     entropy = np.zeros(n, dtype=np.float32)
-    for part in parts:
-        if isinstance(part, np.ndarray):
-            entropy = entropy - (part * np.log(part + EPSILON)).sum(axis=1)
-        else:
-            entropy = entropy + part
+    if gaussian_mean is not None:
+        entropy = entropy + gaussian_mean
+    for probs in branch_probs:
+        entropy = entropy - (probs * np.log(probs + EPSILON)).sum(axis=1)
     return entropy.astype(np.float32)
 
 
@@ -161,7 +160,7 @@ class Policy:
         mu, logits, memories_out = self._numpy_actor.heads(list(obs), allowed, memories)
         n = len(obs[0])
         log_parts: list[np.ndarray] = []
-        entropy_parts: list = []
+        gaussian_entropy, branch_probs = None, []
         if mu is not None:
             sigma, variance_term, log_term, gaussian_entropy_mean = self._numpy_actor.gaussian
             if deterministic:
@@ -170,7 +169,7 @@ class Policy:
                 noise = torch.randn(mu.shape, generator=self.generator).numpy()
                 raw = mu + noise * sigma
             log_parts.append(-((raw - mu) ** 2) / variance_term - log_term - _HALF_LOG_2PI)
-            entropy_parts.append(gaussian_entropy_mean)
+            gaussian_entropy = gaussian_entropy_mean
             raw = raw.astype(np.float32, copy=False)
             env_continuous = np.minimum(np.maximum(raw, -CONTINUOUS_CLIP), CONTINUOUS_CLIP) / CONTINUOUS_CLIP
         else:
@@ -190,14 +189,14 @@ class Policy:
                 action = np.minimum(action, last_allowed)
             discrete[:, index] = action
             log_parts.append(np.log(probs[rows, action] + EPSILON)[:, None])
-            entropy_parts.append(probs)
+            branch_probs.append(probs)
         log_probs = log_parts[0] if len(log_parts) == 1 else np.concatenate(log_parts, axis=1)
         return PolicyOutput(
             env_actions=ActionTuple(env_continuous, discrete),
             continuous_raw=raw,
             discrete=discrete,
             log_probs=log_probs.astype(np.float32, copy=False),
-            entropy_of=functools.partial(_numpy_entropy, n, entropy_parts),
+            entropy_of=functools.partial(_numpy_entropy, n, gaussian_entropy, branch_probs),
             memories=memories_out,
         )
 

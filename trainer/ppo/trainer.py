@@ -184,7 +184,7 @@ class PPOTrainer:
             fields[f"values:{name}"] = values[name]
             fields[f"returns:{name}"] = returns
             stats[f"Policy/{getattr(provider, 'stat_name', name.capitalize())} Value Estimate"] = float(
-                np.float32(float(np.add.reduce(values[name])) / length))  # np.mean's float32, without its wrapper
+                np.mean(values[name]))
         if traj.done:
             self._episode_intrinsic.pop(traj.episode, None)
         fields["advantages"] = (advantages[0] if len(advantages) == 1  # the mean of one row is that row
