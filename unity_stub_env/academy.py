@@ -132,7 +132,7 @@ class Academy:
     def advance(self) -> None:
         """Run ``decision_period`` control steps; finished agents are reset on the spot."""
         task = self.task
-        restarted = np.zeros(task.num_agents, dtype=bool)
+        restarted = None  # bool [n] once some agent has been reset during this decision period
         for _ in range(self.decision_period):
             result = task.step(self.continuous, self.discrete)
             if task.sets_reward:
@@ -140,10 +140,10 @@ class Academy:
             else:
                 self.pending_reward += result.rewards
             self.pending_stats.extend(result.stats)
-            done = result.done & ~restarted
+            done = result.done if restarted is None else result.done & ~restarted
             if done.any():
                 self._end_episodes(done, result.interrupted)
-                restarted |= done
+                restarted = done if restarted is None else restarted | done
 
     def _end_episodes(self, done: np.ndarray, interrupted: np.ndarray) -> None:
         """Queue the terminal infos of ``done`` [n] agents, then start their next episode."""

@@ -12,6 +12,7 @@ the shortest varint (``varint_columns`` for a column of integers).
 """
 from __future__ import annotations
 
+import functools
 from typing import Sequence, Union
 
 import numpy as np
@@ -22,8 +23,13 @@ VARINT, I64, LEN, I32 = 0, 1, 2, 5
 MIN_MATRIX_ROWS = 8  # below this many records numpy's per-call cost loses to a plain loop
 
 
+_ONE_BYTE = tuple(bytes([value]) for value in range(0x80))  # the varints of 0..127
+
+
 def varint(value: int) -> bytes:
     """The shortest varint of a non-negative integer."""
+    if 0 <= value < 0x80:  # tags, lengths and ids of small messages: no loop, no new bytes
+        return _ONE_BYTE[value]
     if value < 0:
         raise ValueError("negative values need 10-byte varints; not used here")
     out = bytearray()
@@ -37,12 +43,15 @@ def varint(value: int) -> bytes:
             return bytes(out)
 
 
+@functools.lru_cache(maxsize=256)
 def tag(field_number: int, wire_type: int) -> bytes:
     return varint((field_number << 3) | wire_type)
 
 
+@functools.lru_cache(maxsize=4096)
 def len_prefix(field_number: int, length: int) -> bytes:
-    """Tag and byte length of a length-delimited field holding ``length`` bytes."""
+    """Tag and byte length of a length-delimited field holding ``length`` bytes (cached: a
+    simulator's messages repeat the same few lengths every step)."""
     return tag(field_number, LEN) + varint(length)
 
 

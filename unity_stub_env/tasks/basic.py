@@ -34,6 +34,21 @@ OPTIMAL_RETURN = 7 * STEP_REWARD + LARGE_GOAL_REWARD  # 0.93, see the module doc
 
 _MOVE_OF_ACTION = np.array([0, -1, 1], dtype=np.int64)  # stay, left, right
 
+# Everything a step needs, looked up by position (one numpy call each instead of a chain of
+# them: with one agent the per-call cost is the whole step). Built with the same float32
+# additions the step used to do, so rewards are bit-for-bit what they were.
+_POSITIONS = np.arange(NUM_POSITIONS)
+_CHOICES = np.arange(3, dtype=np.int64)  # .take(..., mode="clip") clamps any action into 0..2
+_NEXT_POSITION = np.minimum(np.maximum(_POSITIONS[:, None] + _MOVE_OF_ACTION[None, :], 0),
+                            NUM_POSITIONS - 1)  # [position, action] -> position after the move
+_REWARD_AT = np.full(NUM_POSITIONS, STEP_REWARD, dtype=np.float32)
+_REWARD_AT[SMALL_GOAL] += SMALL_GOAL_REWARD
+_REWARD_AT[LARGE_GOAL] += LARGE_GOAL_REWARD
+_GOAL_AT = np.isin(_POSITIONS, [SMALL_GOAL, LARGE_GOAL])
+_LARGE_AT = _POSITIONS == LARGE_GOAL
+_MASK_AT = np.zeros((NUM_POSITIONS, 3), dtype=bool)  # "left" at the left wall, "right" at the right
+_MASK_AT[0, 1] = _MASK_AT[NUM_POSITIONS - 1, 2] = True
+
 
 class BasicTask(Task):
     name = "basic"
@@ -66,32 +81,25 @@ class BasicTask(Task):
 
     def action_mask(self) -> np.ndarray:
         """bool [n, 3]: True where the move would walk into a wall."""
-        mask = np.zeros((self.num_agents, 3), dtype=bool)
-        mask[:, 1] = self.position == 0
-        mask[:, 2] = self.position == NUM_POSITIONS - 1
-        return mask
+        return _MASK_AT[self.position]
 
     def step(self, continuous: np.ndarray, discrete: np.ndarray) -> TaskStep:
-        """discrete int [n, 1] in {0, 1, 2} -> one corridor step for every agent."""
-        # np.minimum/np.maximum: np.clip's Python wrapper costs more than this whole step
-        choice = np.minimum(np.maximum(np.asarray(discrete, dtype=np.int64).reshape(self.num_agents, -1)[:, 0], 0), 2)
-        self.position = np.minimum(np.maximum(self.position + _MOVE_OF_ACTION[choice], 0), NUM_POSITIONS - 1)
+        """discrete int [n, 1] in {0, 1, 2} -> one corridor step for every agent (actions outside
+        0..2 are clamped into it)."""
+        choice = _CHOICES.take(np.asarray(discrete).reshape(self.num_agents, -1)[:, 0], mode="clip")
+        self.position = _NEXT_POSITION[self.position, choice]
         self.episode_step += 1
-        small = self.position == SMALL_GOAL
-        large = self.position == LARGE_GOAL
-        rewards = np.full(self.num_agents, STEP_REWARD, dtype=np.float32)
-        rewards[small] += SMALL_GOAL_REWARD
-        rewards[large] += LARGE_GOAL_REWARD
-        reached = small | large
-        interrupted = ~reached & (self.max_step > 0) & (self.episode_step >= self.max_step)
+        reached = _GOAL_AT[self.position]
+        interrupted = self.episode_step >= self.max_step if self.max_step > 0 else np.zeros_like(reached)
+        interrupted &= ~reached
         done = reached | interrupted
-        return TaskStep(rewards, done, interrupted, self._episode_stats(done, large))
+        return TaskStep(_REWARD_AT[self.position], done, interrupted, self._episode_stats(done))
 
-    def _episode_stats(self, done: np.ndarray, large: np.ndarray) -> list:
+    def _episode_stats(self, done: np.ndarray) -> list:
         if not done.any():
             return []
+        final = self.position[done]
         stats = [("Basic/Large Goal Reached", float(hit), StatsAggregationMethod.AVERAGE)
-                 for hit in large[done].tolist()]
-        stats.append(("Basic/Last Final Position", float(self.position[done][-1]),
-                      StatsAggregationMethod.MOST_RECENT))
+                 for hit in _LARGE_AT[final].tolist()]
+        stats.append(("Basic/Last Final Position", float(final[-1]), StatsAggregationMethod.MOST_RECENT))
         return stats
