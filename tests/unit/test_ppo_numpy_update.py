@@ -2,6 +2,8 @@
 (autograd + trainer.ppo.adam), from identical trainers fed identical trajectories."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import torch
@@ -76,3 +78,82 @@ def test_visual_observations_keep_the_autograd_path():
                                            DimensionProperty.TRANSLATIONAL_EQUIVARIANCE), ObservationType.DEFAULT, "cam")
     trainer = PPOTrainer("V", BehaviorSpec((visual,), ActionSpec(1, ())), PPOHyperparams(hidden_units=8), seed=0)
     assert not numpy_update.supports(trainer)
+
+
+def _filled_trainer(spec: BehaviorSpec, masked: bool) -> PPOTrainer:
+    hp = PPOHyperparams(batch_size=32, buffer_size=200, num_epoch=2, normalize=True, hidden_units=24,
+                        num_layers=2, beta=5e-3, learning_rate=3e-3, reward_signals={"extrinsic": (0.99, 0.5)})
+    trainer = PPOTrainer("B", spec, hp, seed=7)
+    rng = np.random.default_rng(3)
+    branches = spec.action_spec.discrete_branches
+    for length in (120, 100):
+        obs = [rng.standard_normal((length, o.shape[0])).astype(np.float32) for o in spec.observation_specs]
+        mask = np.zeros((length, sum(branches)), dtype=bool) if branches else None
+        if masked:
+            mask[1::3, 0] = True
+        out = trainer.policy.act(obs, mask)
+        trainer.process_trajectory(Trajectory(obs, [o[-1] for o in obs], rng.standard_normal(length).astype(np.float32),
+                                              out.continuous_raw, out.discrete, out.log_probs, mask, False, True))
+    return trainer
+
+
+def _state(trainer: PPOTrainer) -> list[np.ndarray]:
+    tensors = [*trainer.policy.actor.state_dict().values(), *trainer.critic.state_dict().values(),
+               *trainer.optimizer.exp_avg, *trainer.optimizer.exp_avg_sq]
+    return [t.numpy().copy() for t in tensors]
+
+
+@pytest.mark.skipif(not numpy_update.fork_pays_off(float("inf")), reason="needs Linux, fork and two CPUs")
+@pytest.mark.parametrize("action_spec,masked", [(ActionSpec(2, ()), False), (ActionSpec(1, (3, 2)), True)])
+def test_critic_in_a_child_process_gives_the_same_bits(action_spec, masked, monkeypatch):
+    spec = BehaviorSpec((vec(6), vec(2, "w")), action_spec)
+    collected = []  # what the children handed back (None would mean the parent redid their work)
+    collect = numpy_update._CriticChild.collect
+    monkeypatch.setattr(numpy_update._CriticChild, "collect", lambda self: collected.append(collect(self)) or collected[-1])
+    results = []
+    for min_work in (float("inf"), 0.0):  # sequential, then the critic's half in a child
+        monkeypatch.setattr(numpy_update, "FORK_MIN_WORK", min_work)
+        trainer = _filled_trainer(spec, masked)
+        stats = trainer.update()
+        results.append((stats, _state(trainer), trainer.optimizer.step_count))
+    (seq_stats, seq_state, seq_steps), (par_stats, par_state, par_steps) = results
+    assert seq_steps == par_steps == 2 * (220 // 32)
+    assert len(collected) == 1 and len(collected[0]) == seq_steps
+    assert seq_stats == par_stats  # exactly: the same float operations in the same order
+    assert len(seq_state) == len(par_state)
+    for x, y in zip(seq_state, par_state):
+        assert x.tobytes() == y.tobytes()
+    assert any(not np.array_equal(x, y) for x, y in zip(seq_state, _state(_filled_trainer(spec, masked))))
+
+
+@pytest.mark.skipif(not numpy_update.fork_pays_off(float("inf")), reason="needs Linux, fork and two CPUs")
+def test_critic_child_runs_elsewhere_and_a_failed_child_changes_nothing():
+    weights, moments = [np.arange(6, dtype=np.float32).reshape(2, 3)], np.zeros(6, dtype=np.float32)
+    part = numpy_update._AdamPart([object()], weights, [(0, 6)], moments, moments.copy())
+
+    def step_in_child(k: int, index: np.ndarray) -> float:
+        weights[0] += float(index.sum())  # written in the child, copied back by collect
+        part.exp_avg[:] = k + 1
+        return float(os.getpid())
+
+    child = numpy_update._CriticChild.start(part, step_in_child, [np.array([1, 2]), np.array([3])])
+    values = child.collect()
+    assert len(values) == 2 and all(v != os.getpid() for v in values)  # another process computed them
+    np.testing.assert_array_equal(weights[0], np.arange(6).reshape(2, 3) + 3.0 + 3.0)
+    np.testing.assert_array_equal(moments, np.full(6, 2.0))
+
+    def fail_in_child(k: int, index: np.ndarray) -> float:
+        weights[0][:] = -1.0
+        raise RuntimeError("boom")
+
+    before = weights[0].copy()
+    assert numpy_update._CriticChild.start(part, fail_in_child, [np.array([0])]).collect() is None
+    np.testing.assert_array_equal(weights[0], before)  # the parent's critic is untouched
+
+
+def test_the_fork_is_kept_for_updates_worth_it():
+    # basic: 3 epochs x 8 minibatches x 32 rows, 20x20 + 20 + 21 critic parameters; ball3d:
+    # 3 x 187 x 64 rows, 8x128 + 128 + 128x128 + 128 + 129 parameters
+    assert not numpy_update.fork_pays_off(3 * 8 * 32 * (20 * 20 + 20 + 21))
+    ball3d = 3 * 187 * 64 * (8 * 128 + 128 + 128 * 128 + 128 + 129)
+    assert numpy_update.fork_pays_off(ball3d) == numpy_update.fork_pays_off(float("inf"))

@@ -336,14 +336,19 @@ class PPOTrainer:
             provider_columns.update({k: data.pop(k) for k in [_next_obs_key(i) for i in range(n_obs)] if k in data})
         stepper = numpy_update.NumpyPPO(self)
         actor_in, critic_in = stepper.prepare(obs)
+        orders = [order.numpy() for order in self._minibatch_indices()]
         try:
-            for order in self._minibatch_indices():
-                index = order.numpy()
-                batch = {k: v[index] for k, v in data.items()}
-                stats = stepper.step(batch, actor_in[index], critic_in[index], learning_rate, beta, epsilon)
-                if self.providers:
+            if self.providers:  # curiosity / rnd step with every minibatch, in order
+                results = []
+                for index in orders:
+                    batch = {k: v[index] for k, v in data.items()}
+                    stats = stepper.step(batch, actor_in[index], critic_in[index], learning_rate, beta, epsilon)
                     batch.update({k: v[index] for k, v in provider_columns.items()})
                     stats.update(self._update_providers(batch))
+                    results.append(stats)
+            else:
+                results = stepper.run(data, actor_in, critic_in, orders, learning_rate, beta, epsilon)
+            for stats in results:
                 for key, value in stats.items():
                     collected.setdefault(key, []).append(value)
         finally:
