@@ -396,14 +396,18 @@ class _CriticChild:
     def collect(self) -> list[float] | None:
         """Wait for the child; copy its critic in and return its value terms (None if it failed)."""
         try:
-            _, status = os.waitpid(self.pid, 0)
+            try:
+                _, status = os.waitpid(self.pid, 0)
+            except OSError as error:  # e.g. reaped by someone else: its result cannot be trusted
+                status = f"unknown: {error}"
             if status != 0:
-                logger.warning("The critic's update in a child process failed (wait status %d); "
+                logger.warning("The critic's update in a child process failed (wait status %s); "
                                "the trainer steps the critic itself.", status)
                 return None
             offset = 0
             for array in self.arrays:
-                array.reshape(-1)[:] = np.frombuffer(self.shared, dtype=array.dtype, count=array.size, offset=offset)
+                np.copyto(array, np.frombuffer(self.shared, dtype=array.dtype, count=array.size,
+                                               offset=offset).reshape(array.shape))
                 offset += array.nbytes
             return np.frombuffer(self.shared, dtype=np.float64, count=self.count, offset=offset).tolist()
         finally:
