@@ -48,7 +48,6 @@ FALL_DEPTH = -2.0
 FALL_DISTANCE = 3.0
 ON_PLATE_REWARD = 0.1
 FALL_REWARD = -1.0
-_ON_PLATE_REWARD32, _FALL_REWARD32 = np.float32(ON_PLATE_REWARD), np.float32(FALL_REWARD)
 _PHYSICS_PARAMETERS = ("mass", "scale", "gravity")  # the environment parameters reset() reads
 
 
@@ -180,33 +179,18 @@ class Ball3DTask(Task):
         return [obs]
 
     def step(self, continuous: np.ndarray, discrete: np.ndarray) -> TaskStep:
-        """continuous float [n, 2] in [-1, 1] -> one 0.02 s control step of every plate.
-
-        Runs five times per decision for every plate, so it is written for numpy's per-call
-        cost: np.minimum/np.maximum instead of clip's wrapper, in place where the operand is
-        ours, float32 rewards picked directly (the values are those of the plain expressions)."""
-        action = np.asarray(continuous, dtype=np.float64).reshape(self.num_agents, 2)
-        action = np.minimum(np.maximum(action, -1.0), 1.0)
-        action *= TILT_RATE
-        target = self.target_tilt
-        target += action
-        np.maximum(target, -MAX_TILT, out=target)
-        np.minimum(target, MAX_TILT, out=target)
-        self.ctrl_rows[:] = target
+        """continuous float [n, 2] in [-1, 1] -> one 0.02 s control step of every plate."""
+        action = np.asarray(continuous, dtype=np.float64).reshape(self.num_agents, 2).clip(-1.0, 1.0)
+        self.target_tilt = (self.target_tilt + action * TILT_RATE).clip(-MAX_TILT, MAX_TILT)
+        self.ctrl_rows[:] = self.target_tilt
         mujoco.mj_step(self.model, self.data, nstep=SUBSTEPS)
         self.episode_step += 1
         relative = self.qpos_rows[:, 2:5] - self.plate_centre
-        off_plate = np.abs(relative[:, :2]) > FALL_DISTANCE
-        fell = relative[:, 2] < FALL_DEPTH
-        fell |= off_plate[:, 0]
-        fell |= off_plate[:, 1]
-        rewards = np.where(fell, _FALL_REWARD32, _ON_PLATE_REWARD32)
-        if self.max_step > 0:
-            interrupted = self.episode_step >= self.max_step
-            interrupted &= ~fell
-            done = fell | interrupted
-        else:
-            interrupted, done = np.zeros_like(fell), fell
+        fell = ((relative[:, 2] < FALL_DEPTH) | (np.abs(relative[:, 0]) > FALL_DISTANCE)
+                | (np.abs(relative[:, 1]) > FALL_DISTANCE))
+        rewards = np.where(fell, FALL_REWARD, ON_PLATE_REWARD).astype(np.float32)
+        interrupted = ~fell & (self.max_step > 0) & (self.episode_step >= self.max_step)
+        done = fell | interrupted
         stats = []
         if done.any():
             stats = [("3DBall/Ball Fell", float(f), StatsAggregationMethod.AVERAGE)
