@@ -100,7 +100,6 @@ class Ball3DTask(Task):
         # every ball has the default mass and size and gravity is the default (written by our own
         # formulas, so writing them again would change nothing): episode starts can skip that
         self._default_physics = False
-        self._custom_physics = False
         self.reset()
 
     def _index_arrays(self) -> None:
@@ -134,12 +133,13 @@ class Ball3DTask(Task):
         agents = np.flatnonzero(self.all_agents(mask))
         if len(agents) == 0:
             return
-        if self._custom_physics or any(key in self.env_params.samplers for key in _PHYSICS_PARAMETERS):
-            self._custom_physics = True  # from now on every episode start reads the parameters
+        # a parameter the trainer sent stays set (samplers are never removed): from then on every
+        # episode start reads them; until then the defaults are written once, by the
+        # constructor's reset of every agent
+        custom = any(key in self.env_params.samplers for key in _PHYSICS_PARAMETERS)
+        if custom or not self._default_physics:
             self._apply_environment_parameters(agents)
-        elif not self._default_physics:  # the defaults once (the constructor's reset of every agent)
-            self._apply_environment_parameters(agents)
-            self._default_physics = bool(len(agents) == self.num_agents)
+            self._default_physics = not custom and len(agents) == self.num_agents
         draws = self.rng.uniform(-1.0, 1.0, size=(len(agents), 4))
         tilt = draws[:, :2] * np.deg2rad(10.0)
         qpos, qvel = self.data.qpos, self.data.qvel
