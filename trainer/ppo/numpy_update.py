@@ -103,8 +103,8 @@ class _Body:
 
 
 class NumpyPPO:
-    """Minibatch steps for one PPOTrainer; ``prepare`` once per update, then ``run`` (or ``step``
-    per minibatch), ``finish`` at the end (bumps the torch version counters).
+    """Minibatch steps for one PPOTrainer; ``prepare`` once per update, then ``run``, ``finish``
+    at the end (bumps the torch version counters).
 
     The actor and the critic are separate networks here (a shared body keeps the torch path,
     see ``supports``), so their halves of a minibatch step never touch each other's arrays:
@@ -190,12 +190,6 @@ class NumpyPPO:
                 for (policy_term, entropy), value_term in zip(actor, values)]
 
     # ------------------------------------------------------------------ one minibatch
-    def step(self, batch: dict[str, np.ndarray], actor_in: np.ndarray, critic_in: np.ndarray,
-             learning_rate: float, beta: float, epsilon: float) -> dict[str, float]:
-        t = self.optimizer.step_count = self.optimizer.step_count + 1
-        policy_term, entropy = self.actor_step(batch, actor_in, learning_rate, beta, epsilon, t)
-        return _stats(policy_term, self.critic_step(batch, critic_in, learning_rate, t), entropy)
-
     def actor_step(self, batch: dict[str, np.ndarray], actor_in: np.ndarray, learning_rate: float,
                    beta: float, epsilon: float, t: int) -> tuple[float, float]:
         """The policy and entropy terms' gradients and Adam step (number ``t``) for the actor.

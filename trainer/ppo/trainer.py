@@ -338,16 +338,11 @@ class PPOTrainer:
         actor_in, critic_in = stepper.prepare(obs)
         orders = [order.numpy() for order in self._minibatch_indices()]
         try:
-            if self.providers:  # curiosity / rnd step with every minibatch, in order
-                results = []
-                for index in orders:
-                    batch = {k: v[index] for k, v in data.items()}
-                    stats = stepper.step(batch, actor_in[index], critic_in[index], learning_rate, beta, epsilon)
-                    batch.update({k: v[index] for k, v in provider_columns.items()})
+            results = stepper.run(data, actor_in, critic_in, orders, learning_rate, beta, epsilon)
+            if self.providers:  # curiosity / rnd: networks of their own, on the same minibatches
+                for stats, index in zip(results, orders):
+                    batch = {k: v[index] for k, v in {**data, **provider_columns}.items()}
                     stats.update(self._update_providers(batch))
-                    results.append(stats)
-            else:
-                results = stepper.run(data, actor_in, critic_in, orders, learning_rate, beta, epsilon)
             for stats in results:
                 for key, value in stats.items():
                     collected.setdefault(key, []).append(value)
