@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -49,12 +50,33 @@ def run_dir_of(options) -> str:
     return os.path.join(ck.results_dir, ck.run_id)
 
 
+_STARTUP_FILES = re.compile(r"configuration\.yaml|run_logs/(timers\.json|training_status\.json|Player-\d+\.log)")
+
+
+def only_startup_files(run_dir: str) -> bool:
+    """True if ``run_dir`` holds nothing but what a run writes before its first step (the
+    configuration, timers, training status, simulator logs) and no checkpoint, model or
+    TensorBoard data: every run that trained leaves those (Ctrl-C and a simulator that stops
+    included; they end with a final checkpoint)."""
+    for folder, _, files in os.walk(run_dir):
+        for name in files:
+            relative = os.path.relpath(os.path.join(folder, name), run_dir).replace(os.sep, "/")
+            if not _STARTUP_FILES.fullmatch(relative):
+                return False
+    return True
+
+
 def prepare_run_dir(options) -> str:
     """results/<run-id>: refuse to clobber an earlier run unless --resume or --force."""
     ck = options.checkpoint_settings
     run_dir = run_dir_of(options)
     if os.path.isdir(run_dir) and os.listdir(run_dir):
-        if not (ck.resume or ck.force or ck.inference):
+        if ck.resume or ck.force or ck.inference:
+            pass
+        elif only_startup_files(run_dir):  # e.g. a simulator that failed at start: nothing to lose
+            logger.info("%s holds only the files of an earlier start that never trained; using it again.",
+                        run_dir)
+        else:
             raise UserError(
                 f"Previous data from this run ID was found in {run_dir}. Either use --resume to continue "
                 "that run, --force to overwrite it, or pick another --run-id."

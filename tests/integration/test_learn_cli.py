@@ -177,6 +177,19 @@ def test_simulator_that_dies_is_reported(tmp_path, basic_config, env_no_proxy):
     assert r.returncode == 2
     assert "Crash" in r.stderr and "Traceback" not in r.stderr
     assert "exited with code 3" in r.stderr and "its log ends: 'Fatal: no display'" in r.stderr
+    # the folder it left holds no checkpoint, model or summary: the rerun needs no --force ...
+    left = sorted(str(p.relative_to(tmp_path / "res" / "ppo")) for p in (tmp_path / "res" / "ppo").rglob("*"))
+    assert left == ["configuration.yaml", "run_logs", "run_logs/Player-0.log", "run_logs/timers.json",
+                    "run_logs/training_status.json"]
+    again = [str(basic_config(max_steps=300, interval=1000, summary=100)), "--env", "stub:basic",
+             "--base-port", str(free_port_block()), "--results-dir", str(tmp_path / "res")]
+    r = learn(again, cwd=tmp_path, timeout=120, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "earlier start that never trained" in r.stdout + r.stderr
+    assert (tmp_path / "res" / "ppo" / "Basic.onnx").is_file()
+    # ... but once a run has trained there, its results are kept
+    r = learn(again, cwd=tmp_path, timeout=120, env=env_no_proxy)
+    assert r.returncode == 2 and "Previous data from this run ID" in r.stderr
 
 
 def _assert_final_save(run, min_steps: int) -> None:
