@@ -30,7 +30,7 @@ def test_hybrid_heads_match_torch_and_follow_updates():
     allowed = np.ones((7, 5), np.float32)
     allowed[:, 1] = 0.0
     for round_ in range(3):
-        mu, logits, _ = fast.heads(obs, allowed)
+        mu, logits, _ = fast.heads(obs, allowed == 0)
         t_mu, t_logits = torch_heads(actor, obs, allowed)
         np.testing.assert_allclose(mu, t_mu, rtol=1e-5, atol=1e-6)
         for a, b in zip(logits, t_logits):

@@ -11,7 +11,7 @@ stale values.
 
 Math (same as Actor.heads): x_i -> clip((x_i - mean_i)/sqrt(var_sum_i/steps_i), -5, 5) if
 normalised; h = concat(x_i); h = swish(h W_l^T + b_l) per hidden layer; mu = h W_mu^T + b_mu;
-branch logits = (h W_b^T + b_b) * allowed - 1e8 * (1 - allowed).
+branch logits = (h W_b^T + b_b) * allowed - 1e8 * (1 - allowed), i.e. -1e8 where masked.
 """
 from __future__ import annotations
 
@@ -198,10 +198,11 @@ class NumpyActor(_NumpyCopy):
         self.branches = [_linear(b) for b in actor.discrete_branches]
         self.offsets = list(actor._mask_offsets)
 
-    def heads(self, obs: list[np.ndarray], allowed: np.ndarray | None, memories: np.ndarray | None = None
+    def heads(self, obs: list[np.ndarray], action_mask: np.ndarray | None, memories: np.ndarray | None = None
               ) -> tuple[np.ndarray | None, list[np.ndarray], np.ndarray | None]:
-        """mu [n, c] or None, masked logits [n, k_b] per branch (allowed: float [n, sum], 1 = allowed),
-        and for a recurrent actor the next memories [n, m] (from ``memories``, zero if None)."""
+        """mu [n, c] or None, masked logits [n, k_b] per branch (action_mask: bool [n, sum],
+        True = masked, or None), and for a recurrent actor the next memories [n, m] (from
+        ``memories``, zero if None)."""
         memories_out = None
         if self.recurrent:
             if memories is None:
@@ -213,8 +214,7 @@ class NumpyActor(_NumpyCopy):
         logits = []
         for index, (weight, bias) in enumerate(self.branches):
             branch = h @ weight + bias
-            if allowed is not None:
-                a = allowed[:, self.offsets[index]:self.offsets[index + 1]]
-                branch = branch * a - 1e8 * (1.0 - a)
+            if action_mask is not None:  # logit * 1 - 0 where allowed, logit * 0 - 1e8 where masked
+                branch = np.where(action_mask[:, self.offsets[index]:self.offsets[index + 1]], -1e8, branch)
             logits.append(branch)
         return mu, logits, memories_out

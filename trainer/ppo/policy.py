@@ -156,8 +156,7 @@ class Policy:
         Runs once per decision step, often for one agent, so it is written for numpy's per-call
         cost: reductions through the ufuncs (``ndarray.max``/``sum`` add a Python wrapper each),
         no copies of arrays that already have their dtype."""
-        allowed = None if action_mask is None else np.logical_not(action_mask).astype(np.float32)
-        mu, logits, memories_out = self._numpy_actor.heads(list(obs), allowed, memories)
+        mu, logits, memories_out = self._numpy_actor.heads(list(obs), action_mask, memories)
         n = len(obs[0])
         log_parts: list[np.ndarray] = []
         gaussian_entropy, branch_probs = None, []
@@ -183,10 +182,11 @@ class Policy:
                 action = probs.argmax(axis=1)
             else:
                 u = torch.rand(n, generator=self.generator).numpy()[:, None]
-                action = _SUM(probs.cumsum(axis=1) <= u, axis=1)
-                # rounding can push u past the last cumulative sum: take the last allowed option
-                last_allowed = probs.shape[1] - 1 - (probs[:, ::-1] > 0).argmax(axis=1)
-                action = np.minimum(action, last_allowed)
+                action = _SUM(probs.cumsum(axis=1) <= u, axis=1)  # an option with probability > 0
+                if _MAX(action) >= probs.shape[1]:
+                    # rounding pushed some u past the last cumulative sum: the last allowed option
+                    last_allowed = probs.shape[1] - 1 - (probs[:, ::-1] > 0).argmax(axis=1)
+                    action = np.minimum(action, last_allowed)
             discrete[:, index] = action
             log_parts.append(np.log(probs[rows, action] + EPSILON)[:, None])
             branch_probs.append(probs)
