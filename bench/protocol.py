@@ -172,17 +172,19 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     totals = dict.fromkeys(("stub_physics", "stub_encode", "trainer_decode", "trainer_encode", "stub_decode"), 0.0)
     clock = time.perf_counter
     brains = [build_brain_parameters(spec_key, task.action_spec)]  # sent with the first message only
+    large_lists = True  # as UnityEndpoint: look for lists to decode from bytes while the last had one
     for _ in range(exchanges):
         t0 = clock()
         wire_up = step_message_bytes([(spec_key, academy.collect_encoded().data)], b"", [] if known else brains)
         t1 = clock()
         # as UnityEndpoint._wait_for_call + receive: large agent lists are decoded from the bytes
-        split = records.split_agent_lists(wire_up, records.MIN_ROWS)
+        split = records.split_agent_lists(wire_up, records.MIN_ROWS) if large_lists else None
         body, raw_lists = split if split is not None else (wire_up, None)
         request = unity_message_pb2.UnityMessageProto.FromString(body)
         result = codec.decode_rl_output(request.unity_output, known, raw_lists)
         known.update(result.specs)
         deciding = len(result.steps[spec_key][0])
+        large_lists = deciding + len(result.steps[spec_key][1]) >= records.MIN_ROWS
         actions = {spec_key: known[spec_key].action_spec.empty_action(deciding)}
         t2 = clock()
         response = unity_message_pb2.UnityMessageProto()
