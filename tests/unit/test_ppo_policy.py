@@ -25,7 +25,7 @@ def make_spec(continuous: int, branches: tuple[int, ...], obs_size: int = 4) -> 
     return BehaviorSpec((obs,), ActionSpec(continuous, branches))
 
 
-@pytest.mark.parametrize("n", [1, 256])
+@pytest.mark.parametrize("n", [0, 1, 256])
 def test_hybrid_shapes_and_dtypes(n):
     policy = Policy(make_spec(2, (3, 2)), HYPER, seed=1)
     out = policy.act([np.random.randn(n, 4).astype(np.float32)], np.zeros((n, 5), dtype=bool))

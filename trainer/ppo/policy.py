@@ -183,7 +183,7 @@ class Policy:
             else:
                 u = torch.rand(n, generator=self.generator).numpy()[:, None]
                 action = _SUM(probs.cumsum(axis=1) <= u, axis=1)  # an option with probability > 0
-                if _MAX(action) >= probs.shape[1]:
+                if n and _MAX(action) >= probs.shape[1]:
                     # rounding pushed some u past the last cumulative sum: the last allowed option
                     last_allowed = probs.shape[1] - 1 - (probs[:, ::-1] > 0).argmax(axis=1)
                     action = np.minimum(action, last_allowed)
