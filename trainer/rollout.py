@@ -192,6 +192,8 @@ class AgentTracker:
     def on_decision(self, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
         """Agents asking for a decision: pair their reward with the previous action, cut at
         time_horizon, remember the new observation. Returns their slots (for ``on_actions``)."""
+        if len(ds) == 1:
+            return self._on_one_decision(ds, emit)
         slots = self._slots(ds.agent_id)
         if len(slots) == 0:
             return slots
@@ -213,6 +215,28 @@ class AgentTracker:
             buf[slots, t] = o
         return slots
 
+    def _on_one_decision(self, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
+        """``on_decision`` for a single agent, the usual message of a one-agent behavior: the
+        same writes on scalars instead of a dozen numpy calls on one-element arrays."""
+        agent = int(ds.agent_id[0])
+        slot = self._slot_of.get(agent)
+        if slot is None:  # a new episode: its slot starts without a pending decision
+            slot = int(self._slots(ds.agent_id)[0])
+        elif self.pending[slot]:
+            reward = ds.reward[0]
+            t = self.length[slot]
+            self.rewards[slot, t] = reward + ds.group_reward[0]
+            self.length[slot] = t + 1
+            self.pending[slot] = False
+            self.ep_reward[slot] += reward
+            self.ep_length[slot] += 1
+            if t + 1 >= self.time_horizon:
+                emit(self._emit(slot, agent, [o[0] for o in ds.obs], False, False))
+        t = self.length[slot]
+        for buf, o in zip(self.obs, ds.obs):
+            buf[slot, t] = o[0]
+        return np.array([slot])
+
     def on_actions(
         self,
         slots: np.ndarray,
@@ -225,6 +249,8 @@ class AgentTracker:
     ) -> None:
         """Store the policy's answer for the agents of the last ``on_decision`` call (and, for a
         recurrent policy, the memories it read and the ones it returned)."""
+        if len(slots) == 1:  # one agent: scalar indices (numpy drops the rows' leading axis)
+            slots = int(slots[0])
         t = self.length[slots]
         if self.memory_size:
             self.mem_in[slots, t] = memories_in

@@ -1,5 +1,6 @@
 """Experience assembly against a hand-written three-agent schedule (time_horizon 3)."""
 import numpy as np
+import pytest
 
 from trainer.protocol.types import (
     ActionSpec, BehaviorSpec, DecisionSteps, DimensionProperty, ObservationSpec, ObservationType, TerminalSteps,
@@ -169,9 +170,11 @@ class Oracle:
             self.agents[agent]["pending"] = (self.agents[agent]["obs"], cont[k], disc[k], logp[k], mask[k])
 
 
-def test_random_schedules_give_what_a_per_agent_list_gives():
+@pytest.mark.parametrize("mostly_one", [False, True])
+def test_random_schedules_give_what_a_per_agent_list_gives(mostly_one):
     """Agents that start, skip decisions, hit the time horizon, finish (done or interrupted),
-    terminate without ever deciding, and more agents than the initial capacity."""
+    terminate without ever deciding, and more agents than the initial capacity. ``mostly_one``:
+    most messages carry a single deciding agent (the tracker's scalar path)."""
     rng = np.random.default_rng(11)
     for horizon in (1, 2, 5):
         tracker, oracle = AgentTracker(HYBRID, time_horizon=horizon, capacity=2), Oracle(horizon)
@@ -193,6 +196,8 @@ def test_random_schedules_give_what_a_per_agent_list_gives():
                 oracle.terminal(t)
                 alive = [a for a in alive if a not in ending]
             deciding = [a for a in alive if rng.random() < 0.8]  # some skip this decision
+            if mostly_one and rng.random() < 0.8:
+                deciding = deciding[-1:]
             n = len(deciding)
             d = DecisionSteps(obs=[rng.normal(size=(n, 2)).astype(np.float32), rng.normal(size=(n, 3)).astype(np.float32)],
                               reward=rng.normal(size=n).astype(np.float32), agent_id=np.array(deciding, np.int64),
