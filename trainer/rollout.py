@@ -136,9 +136,9 @@ class AgentTracker:
         return len(self._slot_of)
 
     # ------------------------------------------------------------- experience
-    def _record(self, slots: np.ndarray, reward: np.ndarray) -> None:
-        """Close the pending decision of ``slots`` (already in row ``length``) with the reward
-        that just arrived."""
+    def _record(self, slots: np.ndarray | int, reward: np.ndarray) -> None:
+        """Close the pending decision of ``slots`` (int [n], or one slot with a scalar reward;
+        already in row ``length``) with the reward that just arrived."""
         t = self.length[slots]
         self.rewards[slots, t] = reward
         self.length[slots] = t + 1
@@ -224,13 +224,10 @@ class AgentTracker:
             slot = int(self._slots(ds.agent_id)[0])
         elif self.pending[slot]:
             reward = ds.reward[0]
-            t = self.length[slot]
-            self.rewards[slot, t] = reward + ds.group_reward[0]
-            self.length[slot] = t + 1
-            self.pending[slot] = False
+            self._record(slot, reward + ds.group_reward[0])  # scalar indices work there too
             self.ep_reward[slot] += reward
             self.ep_length[slot] += 1
-            if t + 1 >= self.time_horizon:
+            if self.length[slot] >= self.time_horizon:
                 emit(self._emit(slot, agent, [o[0] for o in ds.obs], False, False))
         t = self.length[slot]
         for buf, o in zip(self.obs, ds.obs):
