@@ -340,8 +340,9 @@ class PPOTrainer:
         try:
             results = stepper.run(data, actor_in, critic_in, orders, learning_rate, beta, epsilon)
             if self.providers:  # curiosity / rnd: networks of their own, on the same minibatches
+                columns = {**data, **provider_columns}
                 for stats, index in zip(results, orders):
-                    batch = {k: v[index] for k, v in {**data, **provider_columns}.items()}
+                    batch = {k: v[index] for k, v in columns.items()}
                     stats.update(self._update_providers(batch))
             for stats in results:
                 for key, value in stats.items():
