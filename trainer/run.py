@@ -70,19 +70,17 @@ def prepare_run_dir(options) -> str:
     """results/<run-id>: refuse to clobber an earlier run unless --resume or --force."""
     ck = options.checkpoint_settings
     run_dir = run_dir_of(options)
-    if os.path.isdir(run_dir) and os.listdir(run_dir):
-        if ck.resume or ck.force or ck.inference:
-            pass
-        elif only_startup_files(run_dir):  # e.g. a simulator that failed at start: nothing to lose
-            logger.info("%s holds only the files of an earlier start that never trained; using it again.",
-                        run_dir)
-        else:
+    exists = os.path.isdir(run_dir) and bool(os.listdir(run_dir))
+    if not exists and ck.resume:
+        raise UserError(f"--resume was given but {run_dir} does not exist. Start a new run without --resume.")
+    if exists and not (ck.resume or ck.force or ck.inference):
+        if not only_startup_files(run_dir):
             raise UserError(
                 f"Previous data from this run ID was found in {run_dir}. Either use --resume to continue "
                 "that run, --force to overwrite it, or pick another --run-id."
             )
-    elif ck.resume:
-        raise UserError(f"--resume was given but {run_dir} does not exist. Start a new run without --resume.")
+        # e.g. a simulator that failed at start: nothing to lose
+        logger.info("%s holds only the files of an earlier start that never trained; using it again.", run_dir)
     os.makedirs(os.path.join(run_dir, "run_logs"), exist_ok=True)
     return run_dir
 
