@@ -35,7 +35,6 @@ Target: ours >= 10x the reference's agent-steps/s with reward at equal steps no 
 from __future__ import annotations
 
 import argparse
-import compileall
 import json
 import os
 import platform
@@ -276,10 +275,9 @@ def main(argv: list[str] | None = None) -> int:
         if not needed.exists():
             print(f"missing {needed}: run ./scripts/ensure_interop_venv.sh / install the project")
             return 2
-    # both trainers start from byte-compiled modules (pip compiled the wheels; our editable tree
-    # is compiled here in case it changed since scripts/ensure_venv.sh, see there)
-    for package in ("trainer", "unity_stub_env", "protos"):
-        compileall.compile_dir(REPO / package, quiet=1)
+    # both trainers start from byte-compiled modules: pip compiled the wheels, and the venv
+    # script compiles our editable tree (again here, in case it changed since)
+    subprocess.run([str(REPO / "scripts" / "ensure_venv.sh")], check=True)
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)  # neither trainer may see the other's packages
     args.out.mkdir(parents=True, exist_ok=True)
