@@ -120,6 +120,7 @@ class RunState:
     routers: list[sc.SideChannelRouter]
     runners: dict[str, BehaviorRunner] = field(default_factory=dict)
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
+    _runner_of: dict[str, BehaviorRunner] = field(default_factory=dict)  # behavior name (with team) -> runner
     pending_reset: bool = False
     start_time: float = field(default_factory=time.time)
     _last_progress: float = float("-inf")
@@ -168,9 +169,10 @@ class RunState:
         for env_id, res in enumerate(results):
             for behavior in res.steps:
                 by_behavior.setdefault(behavior, []).append(env_id)
-        specs = self.pool.behavior_specs() if by_behavior else {}
         for behavior, env_ids in by_behavior.items():
-            runner = self.ensure_runner(behavior, specs[behavior])
+            runner = self._runner_of.get(behavior)
+            if runner is None:  # a behavior's first decision: its runner (and spec) looked up once
+                runner = self._runner_of[behavior] = self.ensure_runner(behavior, self.pool.behavior_specs()[behavior])
             # each env's deciding agents are the rows [start, end) of the one batched forward pass
             steps, start = [], 0
             for env_id in env_ids:
@@ -287,12 +289,14 @@ class RunState:
 
     # ------------------------------------------------------------------ side channels
     def side_channel_in(self, results: list[StepResult]) -> None:
-        brains = {brain_name_of(b)[0] for res in results for b in res.steps}
+        brains = None  # the brains of this step, once some simulator sent stats
         for env_id, res in enumerate(results):
             if not res.side_channel:
                 continue
             incoming = self.routers[env_id].dispatch(res.side_channel)
             if incoming.stats:
+                if brains is None:
+                    brains = {brain_name_of(b)[0] for r in results for b in r.steps}
                 env_stats: dict[str, list] = {}
                 for key, value, agg in incoming.stats:
                     env_stats.setdefault(key, []).append((value, agg))
