@@ -486,6 +486,64 @@ def encode_agent_actions(continuous: np.ndarray, discrete: np.ndarray) -> bytes 
     return wire.repeated_rows(1, parts, n)
 
 
+def _encode_few_agent_actions(continuous: np.ndarray, discrete: np.ndarray) -> bytes | None:
+    """``encode_agent_actions`` for fewer than ``wire.MIN_MATRIX_ROWS`` agents, joined in a plain
+    loop (numpy's per-call cost loses there). None for a negative discrete action (its varint
+    would need ten bytes: the protobuf objects then write it)."""
+    n, c = continuous.shape
+    b = discrete.shape[1]
+    rows = discrete.tolist()
+    if b and min(map(min, rows)) < 0:
+        return None
+    floats = continuous.tobytes()  # float32 [n, c], as _as_action_matrices made it
+    as_floats = discrete.astype("<f4").tobytes()
+    deprecated = wire.len_prefix(1, 4 * (c + b)) if c + b else b""
+    continuous_prefix = wire.len_prefix(6, 4 * c) if c else b""
+    records = []
+    for row, actions in enumerate(rows):
+        own = floats[4 * c * row:4 * c * (row + 1)]
+        parts = [deprecated, own, as_floats[4 * b * row:4 * b * (row + 1)]] if c + b else []
+        if c:
+            parts += [continuous_prefix, own]
+        if b:
+            varints = b"".join(map(wire.varint, actions))
+            parts += [wire.len_prefix(7, len(varints)), varints]
+        content = b"".join(parts)
+        records.append(wire.len_prefix(1, len(content)) + content)
+    return b"".join(records)
+
+
+# UnityMessageProto.header = {status: 200}
+_HEADER_OK = wire.len_prefix(1, 3) + wire.tag(1, wire.VARINT) + wire.varint(200)
+
+
+def step_message_bytes(actions: Mapping[str, ActionTuple], side_channel: bytes) -> bytes | None:
+    """The serialized UnityMessageProto answering a call with STEP and status 200, written
+    directly: what ``fill_rl_input`` + ``SerializeToString`` give (the same bytes for one
+    behavior; several behaviors' map entries in ``actions`` order), without building message
+    objects on every step. None when some action needs the protobuf objects (a negative or
+    too large discrete action)."""
+    entries = []
+    for behavior_name, action in actions.items():
+        continuous, discrete = _as_action_matrices(action)
+        if len(continuous) == 0:
+            continue
+        if len(continuous) >= wire.MIN_MATRIX_ROWS:
+            value = encode_agent_actions(continuous, discrete)
+        else:
+            value = _encode_few_agent_actions(continuous, discrete)
+        if value is None:
+            return None
+        key = behavior_name.encode()
+        entry = wire.len_prefix(1, len(key)) + key + wire.len_prefix(2, len(value)) + value
+        entries.append(wire.len_prefix(1, len(entry)) + entry)
+    if side_channel:  # command STEP is 0, the proto3 default: not written
+        entries += [wire.len_prefix(5, len(side_channel)), bytes(side_channel)]
+    rl_input = b"".join(entries)
+    unity_input = wire.len_prefix(1, len(rl_input)) + rl_input
+    return _HEADER_OK + wire.len_prefix(3, len(unity_input)) + unity_input
+
+
 def _fill_agent_actions(value, continuous: np.ndarray, discrete: np.ndarray) -> None:
     """The same messages as ``encode_agent_actions``, one AgentActionProto at a time."""
     deprecated = np.concatenate([continuous, discrete.astype(np.float32)], axis=1)
@@ -498,7 +556,11 @@ def _fill_agent_actions(value, continuous: np.ndarray, discrete: np.ndarray) -> 
 
 def _as_action_matrices(action: ActionTuple) -> tuple[np.ndarray, np.ndarray]:
     """ActionTuple → (float32 [n, c], int32 [n, b]); a None or empty part becomes [n, 0]."""
-    parts = (action.continuous, action.discrete)
+    continuous, discrete = parts = (action.continuous, action.discrete)
+    if (type(continuous) is np.ndarray and type(discrete) is np.ndarray  # what the policy gives
+            and continuous.dtype == np.float32 and discrete.dtype == np.int32
+            and continuous.ndim == discrete.ndim == 2 and len(continuous) == len(discrete)):
+        return continuous, discrete
     rows = {len(p) for p in parts if p is not None and np.size(p) > 0}
     if len(rows) > 1:
         raise ValueError(f"continuous and discrete actions have different agent counts {rows}")

@@ -364,9 +364,12 @@ class UnityEndpoint:
                 raise ValueError(
                     f"{name}: {rows.pop()} action rows for {self._deciding.get(name, 0)} deciding agents"
                 )
-        response = _status_message(STATUS_OK)
-        codec.fill_rl_input(response.unity_input.rl_input, full_actions, side_channel, codec.STEP)
-        self._answer(response)
+        payload = codec.step_message_bytes(full_actions, side_channel)
+        if payload is None:  # an action the direct encoder leaves to the protobuf objects
+            response = _status_message(STATUS_OK)
+            codec.fill_rl_input(response.unity_input.rl_input, full_actions, side_channel, codec.STEP)
+            payload = response.SerializeToString()
+        self._answer_bytes(payload)
 
     def receive(self) -> StepResult:
         """Wait for the simulator's next message and decode it (leaves that call pending)."""
@@ -388,10 +391,13 @@ class UnityEndpoint:
 
     # ------------------------------------------------------------------ internals
     def _answer(self, response: unity_message_pb2.UnityMessageProto) -> None:
+        self._answer_bytes(response.SerializeToString())
+
+    def _answer_bytes(self, payload: bytes) -> None:
         if self._pending is None:
             raise RuntimeError("no simulator call is pending: receive() before sending again")
         call, self._pending = self._pending, None
-        call.answer(response.SerializeToString())
+        call.answer(payload)
 
     def _wait_for_call(self) -> "_Call":
         """Block until the simulator's next call arrives; it becomes the pending call."""
