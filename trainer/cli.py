@@ -113,14 +113,9 @@ def entry() -> None:
     flushed by then (checkpoints, ONNX, TensorBoard, timers, the simulators are stopped); what
     is left is the interpreter's teardown of torch and numpy's module graph, measured at
     0.5-0.6 s, which ``os._exit`` skips after flushing the standard streams and logging."""
-    code = main()
-    logging.shutdown()
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    os._exit(code)
+    from trainer.fast_exit import exit_now
+
+    exit_now(main())
 
 
 if __name__ == "__main__":
