@@ -172,7 +172,8 @@ class RunState:
         for behavior, env_ids in by_behavior.items():
             runner = self._runner_of.get(behavior)
             if runner is None:  # a behavior's first decision: its runner (and spec) looked up once
-                runner = self._runner_of[behavior] = self.ensure_runner(behavior, self.pool.behavior_specs()[behavior])
+                spec = self.pool.behavior_specs()[behavior]
+                runner = self._runner_of[behavior] = self.ensure_runner(behavior, spec)
             # each env's deciding agents are the rows [start, end) of the one batched forward pass
             steps, start = [], 0
             for env_id in env_ids:

@@ -184,6 +184,7 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
             academy.apply_action_list(rl_input.agent_actions.get(academy.behavior_key))
             academy.advance()
 
+
 def entry() -> None:
     """The executable: ``main``, then an immediate exit, like a Unity player quitting. The log
     is flushed and closed and the connection answered by then; skipping the interpreter's
