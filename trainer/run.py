@@ -120,17 +120,17 @@ class RunState:
     routers: list[sc.SideChannelRouter]
     runners: dict[str, BehaviorRunner] = field(default_factory=dict)
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
-    _runner_of: dict[str, BehaviorRunner] = field(default_factory=dict)  # behavior name (with team) -> runner
     pending_reset: bool = False
     start_time: float = field(default_factory=time.time)
     _last_progress: float = float("-inf")
 
     # ------------------------------------------------------------------ behaviors
-    def ensure_runner(self, behavior_name: str, spec) -> BehaviorRunner:
+    def ensure_runner(self, behavior_name: str) -> BehaviorRunner:
         brain, _team = brain_name_of(behavior_name)
         runner = self.runners.get(brain)
         if runner is not None:
             return runner
+        spec = self.pool.behavior_specs()[behavior_name]  # merged over the workers: only for a new brain
         from trainer.behavior import BehaviorRunner
 
         opts = self.options
@@ -170,10 +170,7 @@ class RunState:
             for behavior in res.steps:
                 by_behavior.setdefault(behavior, []).append(env_id)
         for behavior, env_ids in by_behavior.items():
-            runner = self._runner_of.get(behavior)
-            if runner is None:  # a behavior's first decision: its runner (and spec) looked up once
-                spec = self.pool.behavior_specs()[behavior]
-                runner = self._runner_of[behavior] = self.ensure_runner(behavior, spec)
+            runner = self.ensure_runner(behavior)
             # each env's deciding agents are the rows [start, end) of the one batched forward pass
             steps, start = [], 0
             for env_id in env_ids:
