@@ -27,7 +27,7 @@ from protos.communicator_objects import (
 )
 from trainer.protocol import side_channels as sc
 from trainer.protocol import wire
-from trainer.protocol.codec import all_true_capabilities
+from trainer.protocol.codec import HEADER_OK_FIELD, all_true_capabilities
 from trainer.protocol.http2 import CallError, Http2Channel
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
@@ -259,10 +259,6 @@ def _wrap(output, status: int = STATUS_OK) -> unity_message_pb2.UnityMessageProt
     return message
 
 
-_HEADER_OK = header_pb2.HeaderProto(status=STATUS_OK).SerializeToString()
-_HEADER_OK_FIELD = wire.len_prefix(1, len(_HEADER_OK)) + _HEADER_OK  # UnityMessageProto.header
-
-
 def step_message_bytes(lists: list[tuple[str, bytes]], side_channel: bytes, brain_parameters: list) -> bytes:
     """The serialized UnityMessageProto of one step, written directly (no protobuf objects):
     header status 200; unity_output (2) = rl_output (1) {one agentInfos (2) map entry per
@@ -284,7 +280,7 @@ def step_message_bytes(lists: list[tuple[str, bytes]], side_channel: bytes, brai
         init = unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
             brain_parameters=brain_parameters).SerializeToString()
         output += wire.len_prefix(2, len(init)) + init
-    return _HEADER_OK_FIELD + wire.len_prefix(2, len(output)) + output
+    return HEADER_OK_FIELD + wire.len_prefix(2, len(output)) + output
 
 
 # Side channels -------------------------------------------------------------------------------

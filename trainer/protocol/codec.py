@@ -16,7 +16,7 @@ import numpy as np
 
 from google.protobuf.message import DecodeError
 
-from protos.communicator_objects import agent_info_pb2, capabilities_pb2, command_pb2, observation_pb2
+from protos.communicator_objects import agent_info_pb2, capabilities_pb2, command_pb2, header_pb2, observation_pb2
 from protos.communicator_objects import unity_rl_input_pb2, unity_rl_output_pb2
 from trainer.errors import ProtocolError, UnityVersionError
 from trainer.protocol import records, wire
@@ -513,8 +513,9 @@ def _encode_few_agent_actions(continuous: np.ndarray, discrete: np.ndarray) -> b
     return b"".join(records)
 
 
-# UnityMessageProto.header = {status: 200}
-_HEADER_OK = wire.len_prefix(1, 3) + wire.tag(1, wire.VARINT) + wire.varint(200)
+# UnityMessageProto.header = {status: 200}, as a serialized field (both ends write it directly)
+_HEADER_OK = header_pb2.HeaderProto(status=200).SerializeToString()
+HEADER_OK_FIELD = wire.len_prefix(1, len(_HEADER_OK)) + _HEADER_OK
 
 
 def step_message_bytes(actions: Mapping[str, ActionTuple], side_channel: bytes) -> bytes | None:
@@ -541,7 +542,7 @@ def step_message_bytes(actions: Mapping[str, ActionTuple], side_channel: bytes) 
         entries += [wire.len_prefix(5, len(side_channel)), bytes(side_channel)]
     rl_input = b"".join(entries)
     unity_input = wire.len_prefix(1, len(rl_input)) + rl_input
-    return _HEADER_OK + wire.len_prefix(3, len(unity_input)) + unity_input
+    return HEADER_OK_FIELD + wire.len_prefix(3, len(unity_input)) + unity_input
 
 
 def _fill_agent_actions(value, continuous: np.ndarray, discrete: np.ndarray) -> None:
