@@ -32,7 +32,7 @@ from trainer.config.settings import settings_as_dict
 from trainer.config.param_manager import EnvironmentParameterManager
 from trainer.config.support import goal_conditioning_note
 from trainer.envs.pool import EnvPool, PoolSettings
-from trainer.errors import UnityCommunicatorStoppedError, UserError
+from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
 from trainer.protocol import side_channels as sc
 from trainer.protocol.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer.rollout import AgentTracker, concat_masks
@@ -341,6 +341,24 @@ def configure_torch_threads() -> None:
     torch.set_num_threads(max(1, int(os.environ.get("MLAGENTS_LIKE_TORCH_THREADS", "1"))))
 
 
+def check_torch_device(device: str | None) -> None:
+    """A --torch-device (torch_settings.device) that torch cannot parse or this machine cannot
+    use is a user error, reported before the first network is built on it. None means the CPU."""
+    if device is None:
+        return
+    import torch
+
+    try:
+        torch.zeros(1, device=torch.device(device))
+    except (RuntimeError, AssertionError, ValueError) as error:
+        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise ConfigError(
+            f"--torch-device / torch_settings.device {device!r} cannot be used here ({reason}). "
+            f"Use cpu, or a device this torch build and machine have (cuda / cuda:N needs a CUDA "
+            f"build of torch and a GPU)."
+        ) from error
+
+
 def run_training(options) -> int:
     """Train (or run inference) as configured. Returns the process exit code."""
     ck = options.checkpoint_settings
@@ -377,6 +395,7 @@ def run_training(options) -> int:
         pool.launch()
         # while the simulators boot: import torch and the networks (seconds, on a small machine)
         configure_torch_threads()
+        check_torch_device(options.torch_settings.device)
         import trainer.behavior  # noqa: F401
         STOP.check()
         pool.connect()

@@ -235,3 +235,41 @@ def test_sigterm_while_waiting_for_the_editor_stops_at_once(tmp_path, basic_conf
     code, text = run_with_signals(cmd, tmp_path, env_no_proxy, [("Listening on port", signal.SIGTERM)], timeout=40)
     assert code == 0, text
     assert "Traceback" not in text
+
+
+@pytest.mark.parametrize("device", ["bogus", "cuda:7"])
+def test_unusable_torch_device_is_one_message_and_exit_2(tmp_path, basic_config, device, env_no_proxy):
+    res = str(tmp_path / "res")
+    r = learn([str(basic_config(max_steps=300)), "--env", "stub:basic", "--torch-device", device,
+               "--base-port", str(free_port_block()), "--results-dir", res], cwd=tmp_path, timeout=120,
+              env=env_no_proxy)
+    assert r.returncode == 2, (r.stdout[-2000:], r.stderr[-2000:])
+    assert f"torch_settings.device '{device}' cannot be used here" in r.stderr
+    assert "Traceback" not in r.stderr + r.stdout
+    assert not (tmp_path / "res" / "ppo" / "Basic").exists()  # nothing was trained or saved
+    # the folder that start left is only configuration: the corrected rerun needs no --force
+    r = learn([str(basic_config(max_steps=300)), "--env", "stub:basic", "--torch-device", "cpu",
+               "--base-port", str(free_port_block()), "--results-dir", res], cwd=tmp_path, timeout=120,
+              env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "res" / "ppo" / "Basic.onnx").is_file()
+
+
+def test_force_starts_the_run_id_again_from_step_0(tmp_path, basic_config, env_no_proxy):
+    res = tmp_path / "results"
+    cfg = basic_config(max_steps=600, interval=300, summary=300)
+    base = [str(cfg), "--env", "stub:basic", "--run-id", "f", "--results-dir", str(res), "--seed", "2"]
+    r = learn(base + ["--base-port", str(free_port_block())], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-2000:]
+    first_events = sorted(p.name for p in (res / "f" / "Basic").glob("events.out.tfevents.*"))
+    assert len(first_events) == 1
+    cfg.write_text(cfg.read_text().replace("max_steps: 600", "max_steps: 300"))
+    r = learn(base + ["--force", "--base-port", str(free_port_block())], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "at step" not in r.stdout  # nothing restored: a new run under the same id
+    status = json.loads((res / "f" / "run_logs" / "training_status.json").read_text())
+    assert 300 < status["Basic"]["final_checkpoint"]["steps"] < 400  # not 600 + 300
+    events = sorted(p.name for p in (res / "f" / "Basic").glob("events.out.tfevents.*"))
+    assert len(events) == 1 and events != first_events  # the old summaries were cleared
+    steps = [step for step, _ in scalars(res / "f" / "Basic")[0]["Environment/Cumulative Reward"]]
+    assert steps == [300]
