@@ -7,13 +7,13 @@ from __future__ import annotations
 
 import logging
 import os
-import shutil
 import time
 from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from trainer.artifacts.atomic import atomic_copy
 from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
 from trainer.errors import UserError
@@ -182,7 +182,7 @@ class BehaviorRunner:
                         os.remove(f)
         self.last_checkpoint_step = step
         if final:
-            shutil.copyfile(onnx_path, self.paths.final_onnx)
+            atomic_copy(onnx_path, self.paths.final_onnx)
             logger.info("Copied %s to %s.", onnx_path, self.paths.final_onnx)
             status.set_final_checkpoint(self.brain, CheckpointEntry(
                 steps=step, file_path=self.paths.final_onnx, reward=reward, creation_time=entry.creation_time,

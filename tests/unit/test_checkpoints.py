@@ -79,3 +79,28 @@ def test_missing_and_corrupt_files_name_the_path_and_the_fix(tmp_path):
     truncated.write_bytes(truncated.read_bytes()[:40])
     with pytest.raises(UserError, match="corrupt"):
         load_checkpoint(truncated)
+
+
+def test_atomic_copy_replaces_whole_or_not_at_all(tmp_path, monkeypatch):
+    """The final <Behavior>.onnx is copied from the last checkpoint's ONNX this way."""
+    import shutil
+
+    from trainer.artifacts import atomic
+
+    final = tmp_path / "Basic.onnx"
+    final.write_bytes(b"model of the previous run")
+    source = tmp_path / "Basic-300.onnx"
+    source.write_bytes(b"new model " * 1000)
+    atomic.atomic_copy(source, final)
+    assert final.read_bytes() == source.read_bytes()
+
+    def copy_part_then_fail(src, dst):
+        dst.write(src.read(7))
+        raise OSError("disk full")
+
+    monkeypatch.setattr(shutil, "copyfileobj", copy_part_then_fail)
+    source.write_bytes(b"a third model")
+    with pytest.raises(OSError, match="disk full"):
+        atomic.atomic_copy(source, final)
+    assert final.read_bytes() == b"new model " * 1000  # untouched, no temp file left behind
+    assert sorted(os.listdir(tmp_path)) == ["Basic-300.onnx", "Basic.onnx"]

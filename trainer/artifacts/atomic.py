@@ -8,6 +8,7 @@ existing target is left untouched.
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from typing import IO, Callable
 
@@ -29,6 +30,12 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO], None], bina
             os.remove(tmp_path)
         raise
     _fsync_folder(folder)
+
+
+def atomic_copy(source: str | os.PathLike[str], path: str | os.PathLike[str]) -> None:
+    """Copy ``source`` onto ``path`` the same way: readers see the old file or the whole new one."""
+    with open(source, "rb") as src:
+        atomic_write(path, lambda out: shutil.copyfileobj(src, out))
 
 
 def _fsync_folder(folder: str) -> None:
