@@ -31,10 +31,12 @@ from trainer.protocol.types import BehaviorSpec, DecisionSteps, TerminalSteps
 
 @dataclass
 class EpisodeStats:
-    """Finished episodes since the last drain: env reward only, lengths in decisions."""
+    """Finished episodes since the last drain: env reward (the return), the group rewards the
+    episode received, lengths in decisions."""
 
     rewards: list[float] = field(default_factory=list)
     lengths: list[int] = field(default_factory=list)
+    group_rewards: list[float] = field(default_factory=list)
 
 
 class AgentTracker:
@@ -77,6 +79,7 @@ class AgentTracker:
         # a decision awaits its reward: its observation and action sit in row ``length`` already
         self.pending = grow(g("pending"), (), bool)
         self.ep_reward = grow(g("ep_reward"), (), np.float64)
+        self.ep_group_reward = grow(g("ep_group_reward"), (), np.float64)
         self.ep_length = grow(g("ep_length"), (), np.int64)
         m = self.memory_size
         self.memory = grow(g("memory"), (m,), np.float32)  # the next decision's input memory
@@ -103,6 +106,7 @@ class AgentTracker:
             self.pending[s] = False
             self.length[s] = 0
             self.ep_reward[s] = 0.0
+            self.ep_group_reward[s] = 0.0
             self.ep_length[s] = 0
             self.memory[s] = 0.0
         self._index = None
@@ -178,6 +182,7 @@ class AgentTracker:
             s = slots[has]
             self._record(s, ts.reward[idx][has] + ts.group_reward[idx][has])
             self.ep_reward[s] += ts.reward[idx][has]
+            self.ep_group_reward[s] += ts.group_reward[idx][has]
             self.ep_length[s] += 1
         for k, slot in zip(idx, slots):
             slot = int(slot)
@@ -185,6 +190,7 @@ class AgentTracker:
                 emit(self._emit(slot, int(ts.agent_id[k]), [o[k] for o in ts.obs], True, bool(ts.interrupted[k])))
             self.episodes.rewards.append(float(self.ep_reward[slot]))
             self.episodes.lengths.append(int(self.ep_length[slot]))
+            self.episodes.group_rewards.append(float(self.ep_group_reward[slot]))
             del self._slot_of[int(ts.agent_id[k])]
             self._free.append(slot)
         self._index = None
@@ -206,6 +212,7 @@ class AgentTracker:
                 s, reward, group_reward = slots[has], ds.reward[has], ds.group_reward[has]
             self._record(s, reward + group_reward)
             self.ep_reward[s] += reward
+            self.ep_group_reward[s] += group_reward
             self.ep_length[s] += 1
             full = np.nonzero(has & (self.length[slots] >= self.time_horizon))[0]
             for k in full:
@@ -223,9 +230,10 @@ class AgentTracker:
         if slot is None:  # a new episode: its slot starts without a pending decision
             slot = int(self._slots(ds.agent_id)[0])
         elif self.pending[slot]:
-            reward = ds.reward[0]
-            self._record(slot, reward + ds.group_reward[0])  # scalar indices work there too
+            reward, group_reward = ds.reward[0], ds.group_reward[0]
+            self._record(slot, reward + group_reward)  # scalar indices work there too
             self.ep_reward[slot] += reward
+            self.ep_group_reward[slot] += group_reward
             self.ep_length[slot] += 1
             if self.length[slot] >= self.time_horizon:
                 emit(self._emit(slot, agent, [o[0] for o in ds.obs], False, False))

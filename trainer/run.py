@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from trainer.artifacts.console import ConsoleWriter, ProgressLine
-from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, StatsReporter
+from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, GaugeWriter, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
 from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
@@ -242,7 +242,10 @@ class RunState:
             self.reporter.add_many(brain, "Environment/Cumulative Reward", rewards, StatsAggregationMethod.AVERAGE)
             self.reporter.add_many(brain, "Environment/Episode Length", np.asarray(eps.lengths, np.float64),
                                    StatsAggregationMethod.AVERAGE)
-            self.reporter.add_many(brain, "Policy/Extrinsic Reward", rewards, StatsAggregationMethod.AVERAGE)
+            extrinsic = self.runners[brain].settings.reward_signals.get("extrinsic")
+            if extrinsic is not None:  # as ML-Agents: what the extrinsic signal paid, group rewards included
+                paid = extrinsic.strength * (rewards + np.asarray(eps.group_rewards, dtype=np.float64))
+                self.reporter.add_many(brain, "Policy/Extrinsic Reward", paid, StatsAggregationMethod.AVERAGE)
 
     # ------------------------------------------------------------------ learning
     def learn(self, trajectories: list) -> None:
@@ -266,6 +269,7 @@ class RunState:
             for name, lesson in self.params.lesson_numbers().items():
                 self.reporter.add(runner.brain, f"Environment/Lesson Number/{name}", float(lesson),
                                   StatsAggregationMethod.MOST_RECENT)
+            self.reporter.set(runner.brain, "Step", float(step))  # hidden from TensorBoard, a gauge
             self.reporter.write(runner.brain, runner.next_summary, is_training=runner.training and not runner.done)
             while runner.next_summary <= step:
                 runner.next_summary += runner.settings.summary_freq
@@ -384,8 +388,9 @@ def run_training(options) -> int:
                                          {k: v for k, v in (restore or {}).items() if v is not None})
     progress = ProgressLine(sys.stderr)
     tb = TensorboardWriter(run_dir, clear_past_data=ck.force and not ck.resume)
-    reporter = StatsReporter([tb, ConsoleWriter(logger, progress=progress)])
     timers = TimerTree(argv=sys.argv)
+    # as mlagents-learn: every summary also lands in timers.json as gauges (<Behavior>.<tag>.mean/.sum)
+    reporter = StatsReporter([tb, ConsoleWriter(logger, progress=progress), GaugeWriter(timers)])
     write_run_options(options, run_dir)
     state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
                      [sc.SideChannelRouter() for _ in range(env.num_envs)])

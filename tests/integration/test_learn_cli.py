@@ -273,3 +273,25 @@ def test_force_starts_the_run_id_again_from_step_0(tmp_path, basic_config, env_n
     assert len(events) == 1 and events != first_events  # the old summaries were cleared
     steps = [step for step, _ in scalars(res / "f" / "Basic")[0]["Environment/Cumulative Reward"]]
     assert steps == [300]
+
+
+def test_extrinsic_reward_and_timers_gauges_as_mlagents(tmp_path, basic_config, env_no_proxy):
+    """Policy/Extrinsic Reward is what the extrinsic signal paid (strength x return here: basic
+    sends no group reward); every summary is mirrored into timers.json gauges, Step included."""
+    cfg = basic_config(max_steps=900, interval=900, summary=300)
+    cfg.write_text(cfg.read_text().replace("strength: 1.0", "strength: 0.5"))
+    assert "strength: 0.5" in cfg.read_text()
+    res = tmp_path / "results"
+    r = learn([str(cfg), "--env", "stub:basic", "--run-id", "g", "--results-dir", str(res), "--seed", "4",
+               "--base-port", str(free_port_block())], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-2000:]
+    tags, _ = scalars(res / "g" / "Basic")
+    returns, paid = dict(tags["Environment/Cumulative Reward"]), dict(tags["Policy/Extrinsic Reward"])
+    assert sorted(returns) == sorted(paid) == [300, 600, 900]
+    for step, value in returns.items():
+        assert paid[step] == pytest.approx(0.5 * value, rel=1e-5, abs=1e-7)
+    assert "Step" not in tags and "Is Training" not in tags  # hidden from TensorBoard, as in ML-Agents
+    gauges = json.loads((res / "g" / "run_logs" / "timers.json").read_text())["gauges"]
+    assert gauges["Basic.Step.mean"]["count"] == 3 and 900 <= gauges["Basic.Step.mean"]["value"] < 1000
+    assert gauges["Basic.Environment.CumulativeReward.mean"]["value"] == pytest.approx(returns[900], rel=1e-6)
+    assert gauges["Basic.Policy.ExtrinsicReward.mean"]["count"] == 3

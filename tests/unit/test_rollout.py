@@ -86,6 +86,7 @@ def test_schedule_pairs_rewards_cuts_and_terminates():
     # env reward only (group reward excluded), first-decision rewards dropped
     assert eps.rewards == [4.0, 2 + 4 + 5 + 7, 6 + 8]
     assert eps.lengths == [2, 4, 2]
+    assert eps.group_rewards == [0.0, 0.5, 0.0]  # kept apart, for Policy/Extrinsic Reward
     assert tr.num_agents == 0
 
 
@@ -130,13 +131,14 @@ class Oracle:
     def __init__(self, horizon):
         self.horizon, self.agents, self.out, self.episodes = horizon, {}, [], []
 
-    def _close(self, agent, reward, ep_reward):
+    def _close(self, agent, reward, ep_reward, ep_group_reward):
         state = self.agents[agent]
         if state["pending"] is not None:
             state["rows"].append((*state["pending"], reward))
             state["pending"] = None
             state["ep"][0] += ep_reward
             state["ep"][1] += 1
+            state["ep"][2] += ep_group_reward
 
     def _emit(self, agent, next_obs, done, interrupted):
         rows = self.agents[agent]["rows"]
@@ -151,16 +153,15 @@ class Oracle:
         for k, agent in enumerate(t.agent_id.tolist()):
             if agent not in self.agents:
                 continue
-            self._close(agent, t.reward[k] + t.group_reward[k], float(t.reward[k]))
+            self._close(agent, t.reward[k] + t.group_reward[k], float(t.reward[k]), float(t.group_reward[k]))
             self._emit(agent, [o[k] for o in t.obs], True, bool(t.interrupted[k]))
-            reward, length = self.agents.pop(agent)["ep"]
-            self.episodes.append((reward, length))
+            self.episodes.append(tuple(self.agents.pop(agent)["ep"]))
 
     def decision(self, d):
         for k, agent in enumerate(d.agent_id.tolist()):
-            state = self.agents.setdefault(agent, {"pending": None, "rows": [], "ep": [0.0, 0]})
+            state = self.agents.setdefault(agent, {"pending": None, "rows": [], "ep": [0.0, 0, 0.0]})
             had = state["pending"] is not None
-            self._close(agent, d.reward[k] + d.group_reward[k], float(d.reward[k]))
+            self._close(agent, d.reward[k] + d.group_reward[k], float(d.reward[k]), float(d.group_reward[k]))
             if had and len(state["rows"]) >= self.horizon:
                 self._emit(agent, [o[k] for o in d.obs], False, False)
             state["obs"] = [o[k].copy() for o in d.obs]
@@ -212,7 +213,7 @@ def test_random_schedules_give_what_a_per_agent_list_gives(mostly_one):
             tracker.on_actions(slots, cont, disc, logp, mask)
             oracle.actions(deciding, cont, disc, logp, mask)
             episodes = tracker.drain_episodes()
-            stats += list(zip(episodes.rewards, episodes.lengths))
+            stats += list(zip(episodes.rewards, episodes.lengths, episodes.group_rewards))
         assert len(emitted) == len(oracle.out) > 50
         assert stats == oracle.episodes and len(stats) > 20
         for traj, (obs, next_obs, rewards, cont, disc, logp, mask, done, interrupted) in zip(emitted, oracle.out):
