@@ -119,16 +119,24 @@ def train_twice(trainer: PPOTrainer) -> dict[str, float]:
     return stats
 
 
-def test_runs_are_repeatable_and_resumable_through_a_checkpoint(tmp_path):
-    first, second = PPOTrainer("Ball", SPEC, HYPER, seed=3), PPOTrainer("Ball", SPEC, HYPER, seed=3)
+@pytest.mark.parametrize("normalize", [False, True])
+def test_runs_are_repeatable_and_resumable_through_a_checkpoint(tmp_path, normalize):
+    hyper = replace(HYPER, normalize=normalize)
+    first, second = PPOTrainer("Ball", SPEC, hyper, seed=3), PPOTrainer("Ball", SPEC, hyper, seed=3)
     assert train_twice(first) == train_twice(second)
     path = tmp_path / "checkpoint.pt"
     save_checkpoint(path, first.state_dict())
     state = load_checkpoint(path)
     assert {"Policy", "global_step", "Optimizer:value_optimizer", "Optimizer:critic"} <= set(state)
-    resumed = PPOTrainer("Ball", SPEC, HYPER, seed=99)
+    resumed = PPOTrainer("Ball", SPEC, hyper, seed=99)
     resumed.load_state_dict(state)
     assert resumed.step == first.step == 18
+    if normalize:  # the running statistics came back too (18 observations seen, not a fresh normaliser)
+        saved = {k: v for k, v in state["Policy"].items() if "normalization_steps" in k or "running_" in k}
+        assert saved and all(int(v) == 1 + 18 for k, v in saved.items() if k.endswith("normalization_steps"))
+        restored = resumed.state_dict()["Policy"]
+        for key, value in saved.items():
+            assert torch.equal(restored[key], value), key
     obs = [np.ones((4, 3), np.float32)]
     np.testing.assert_array_equal(resumed.policy.act(obs).continuous_raw, first.policy.act(obs).continuous_raw)
     assert train_twice(resumed) == train_twice(first)
