@@ -1,6 +1,8 @@
 """Samplers, seed offsets (§4.3) and lesson advancement (§6.7) with hand-computed numbers."""
 from __future__ import annotations
 
+import logging
+
 import pytest
 
 from trainer.config import (
@@ -157,3 +159,21 @@ def test_upgrade_script_lesson_form_is_read_with_a_warning(caplog):
     assert lessons[0].value == UniformSampler(0.0, 4.0, -1) and lessons[1].value == ConstantSampler(8.0)
     assert lessons[0].completion_criteria.threshold == 0.1
     assert "Lesson0" in caplog.text
+
+
+def test_curriculum_waiting_for_an_unreported_behavior_is_warned_once(caplog):
+    params = {"w": chain(
+        Lesson("w0", ConstantSampler(1.0), CompletionCriteria("Nope", "progress", 0, True, 0.1)),
+        Lesson("w1", ConstantSampler(2.0)),
+    )}
+    manager = EnvironmentParameterManager(params, run_seed=0)
+    with caplog.at_level(logging.WARNING, logger="mlagents_like"):
+        assert manager.update_lessons({"Basic": 0}, {"Basic": 100}, {}) == (False, False)
+        assert caplog.records == []  # nothing has trained yet: the behavior may still connect
+        for step in (50, 90):
+            assert manager.update_lessons({"Basic": step}, {"Basic": 100}, {}) == (False, False)
+    warnings = [r.getMessage() for r in caplog.records]
+    assert warnings == ["environment_parameters.w: lesson 'w0' waits for behavior 'Nope', which no simulator "
+                        "has reported (behaviors so far: Basic); its lessons advance only once that behavior "
+                        "trains. Check completion_criteria.behavior."]
+    assert manager.lesson_numbers() == {"w": 0}

@@ -56,6 +56,7 @@ class EnvironmentParameterManager:
         self.settings: dict[str, EnvironmentParameterSettings] = assign_seeds(params, run_seed)
         self._lesson_numbers = {name: 0 for name in self.settings}
         self._smoothed = {name: 0.0 for name in self.settings}
+        self._waiting_warned: set[str] = set()  # parameters already warned about a missing behavior
         for name, lesson_number in (restore_lessons or {}).items():
             if name not in self.settings:
                 logger.warning("Ignoring saved lesson of unknown environment parameter '%s'.", name)
@@ -109,6 +110,7 @@ class EnvironmentParameterManager:
                 continue
             behavior = criteria.behavior
             if behavior not in trainer_steps:
+                self._warn_waiting(name, behavior, trainer_steps)
                 continue
             progress = trainer_steps[behavior] / max(trainer_max_steps.get(behavior, 1), 1)
             window = self.reward_buffer_size(behavior)
@@ -120,6 +122,19 @@ class EnvironmentParameterManager:
                 updated = True
                 must_reset = must_reset or criteria.require_reset
         return updated, must_reset
+
+    def _warn_waiting(self, name: str, behavior: str, trainer_steps: Mapping[str, int]) -> None:
+        """Once per parameter, after some behavior has trained: its curriculum waits for a behavior
+        no simulator has reported (a typo in completion_criteria.behavior is the usual cause; with
+        default_settings any name is valid at load, since behaviors may connect later)."""
+        if name in self._waiting_warned or not any(trainer_steps.values()):
+            return
+        self._waiting_warned.add(name)
+        lesson = self.settings[name].curriculum[self._lesson_numbers[name]].name
+        logger.warning(
+            "environment_parameters.%s: lesson '%s' waits for behavior '%s', which no simulator has "
+            "reported (behaviors so far: %s); its lessons advance only once that behavior trains. "
+            "Check completion_criteria.behavior.", name, lesson, behavior, ", ".join(sorted(trainer_steps)))
 
     def describe_parameter(self, name: str) -> str:
         lesson = self.settings[name].curriculum[self._lesson_numbers[name]]
