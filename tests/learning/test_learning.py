@@ -37,22 +37,23 @@ def test_basic_reaches_90_percent_of_optimal_within_20k_steps(tmp_path, env_no_p
     assert curve[-1][1] >= 0.9 * OPTIMAL_RETURN, curve  # ...and ends within 10% of it
 
 
-def test_ball3d_learns_to_hold_the_ball_longer(tmp_path, env_no_proxy):
-    """configs/ball3d.yaml (ML-Agents' 3DBall hyperparameters) cut to 48,000 steps, 2 areas
+def test_ball3d_learns_to_hold_the_ball(tmp_path, env_no_proxy):
+    """configs/ball3d.yaml (ML-Agents' 3DBall hyperparameters) cut to 120,000 steps, 2 areas
     (24 agents), seed 3. A policy that does nothing holds the ball ~13 decisions (mean return
-    ~1.35: +0.1 per decision, -1 at the fall); after 4 PPO updates the documented threshold is a
-    mean return >= 2.2 at the last summary, and >= 1.5 x the first summary's (measured: 1.48 ->
-    2.41; the reference mlagents-learn reaches 2.28-2.49 at 48k on this stub, seeds 1-3)."""
+    ~1.35: +0.1 per decision, -1 at the fall; the maximum is 100). The documented threshold: a
+    mean return >= 40 at the last summary (measured 1.48 at the first summary, 70.2 at the last;
+    with 500k steps, as the YAML is written, both trainers end at 100, see bench/train.py)."""
     cfg = tmp_path / "ball3d.yaml"
     text = (ROOT / "configs" / "ball3d.yaml").read_text()
-    cfg.write_text(text.replace("max_steps: 500000", "max_steps: 48000")
+    cfg.write_text(text.replace("max_steps: 500000", "max_steps: 120000")
                        .replace("checkpoint_interval: 100000", "checkpoint_interval: 1000000"))
+    assert "max_steps: 120000" in cfg.read_text()
     r = learn([str(cfg), "--env", "stub:ball3d", "--num-areas", "2", "--seed", "3", "--run-id", "b3",
                "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
               cwd=tmp_path, timeout=600, env=env_no_proxy)
     assert r.returncode == 0, r.stderr[-3000:]
     curve = cumulative_reward(tmp_path / "results" / "b3" / "3DBall")
-    assert curve[-1][0] == 48000
+    assert curve[-1][0] == 120000
     first, last = curve[0][1], curve[-1][1]
     assert first < 1.6, curve
-    assert last >= 2.2 and last >= 1.5 * first, curve
+    assert last >= 40.0, curve
