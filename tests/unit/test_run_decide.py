@@ -1,0 +1,74 @@
+"""One batched forward pass per behavior across simulators, and each simulator gets its own rows back."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from trainer.artifacts.timers import TimerTree
+from trainer.protocol.types import (
+    ActionSpec, ActionTuple, BehaviorSpec, DecisionSteps, DimensionProperty, ObservationSpec, ObservationType,
+    StepResult, TerminalSteps,
+)
+from trainer.run import RunState
+
+SPEC = BehaviorSpec(
+    (ObservationSpec((2,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "vec"),),
+    ActionSpec(1, (3,)),
+)
+
+
+def decision_steps(ids):
+    ids = np.asarray(ids, dtype=np.int64)
+    n = len(ids)
+    # each agent's observation encodes its id, so an action can be traced back to the agent
+    return DecisionSteps(obs=[np.stack([ids * 1.0, -ids * 1.0], axis=1).astype(np.float32).reshape(n, 2)],
+                         reward=np.zeros(n, np.float32), agent_id=ids,
+                         action_mask=[np.zeros((n, 3), bool)], group_id=np.zeros(n, np.int32),
+                         group_reward=np.zeros(n, np.float32))
+
+
+def no_terminals():
+    return TerminalSteps(obs=[np.zeros((0, 2), np.float32)], reward=np.zeros(0, np.float32),
+                         interrupted=np.zeros(0, bool), agent_id=np.zeros(0, np.int64),
+                         group_id=np.zeros(0, np.int32), group_reward=np.zeros(0, np.float32))
+
+
+class TracingPolicy:
+    """Continuous action = the agent's id / 100, discrete = id mod 3; records every call."""
+
+    memory_size = 0
+
+    def __init__(self):
+        self.calls = []
+
+    def act(self, obs, masks=None, deterministic=False, memories=None):
+        self.calls.append((obs[0].copy(), None if masks is None else masks.copy()))
+        ids = obs[0][:, 0]
+        continuous = (ids / 100.0).astype(np.float32)[:, None]
+        discrete = (ids.astype(np.int32) % 3)[:, None]
+        return SimpleNamespace(env_actions=ActionTuple(continuous, discrete))
+
+
+def test_one_forward_pass_per_behavior_and_rows_go_back_to_their_simulator():
+    policy = TracingPolicy()
+    runner = SimpleNamespace(spec=SPEC, trainer=SimpleNamespace(policy=policy),
+                             settings=SimpleNamespace(network_settings=SimpleNamespace(deterministic=False)))
+    state = RunState(options=None, run_dir="", pool=None, params=None, reporter=None, status=None,
+                     timers=TimerTree(), progress=None, routers=[], runners={"Ball": runner})
+    ids = {0: [5, 9], 1: [], 2: [40, 41, 42], 3: [7]}
+    results = [StepResult(steps={"Ball?team=0": (decision_steps(ids[e]), no_terminals())}) for e in range(4)]
+
+    actions, decided = state.decide(results)
+
+    assert len(policy.calls) == 1  # every deciding agent of the behavior, all simulators, one pass
+    np.testing.assert_array_equal(policy.calls[0][0][:, 0], [5, 9, 40, 41, 42, 7])
+    assert policy.calls[0][1].shape == (6, 3)
+    assert "Ball?team=0" not in actions[1]  # nobody decided there: no actions for that simulator
+    for env in (0, 2, 3):
+        got = actions[env]["Ball?team=0"]
+        np.testing.assert_allclose(got.continuous[:, 0], np.asarray(ids[env]) / 100.0, rtol=1e-6)
+        np.testing.assert_array_equal(got.discrete[:, 0], np.asarray(ids[env]) % 3)
+    (_, behavior, steps, _, masks, _), = decided
+    assert behavior == "Ball?team=0"
+    assert [(env, rows.start, rows.stop) for env, _, _, rows in steps] == [(0, 0, 2), (1, 2, 2), (2, 2, 5), (3, 5, 6)]
