@@ -6,6 +6,7 @@ import signal
 import sys
 import textwrap
 
+import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from tests.integration.conftest import BASIC_YAML, free_port_block, learn, run_with_signals
@@ -75,6 +76,38 @@ def test_crashed_simulator_is_restarted_and_training_finishes(tmp_path, basic_co
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert "restarting it and resetting all environments" in r.stdout
     status = json.loads((tmp_path / "results/f/run_logs/training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] > 900
+
+
+@pytest.mark.parametrize("worker0_crash_after", [0, 150])
+def test_each_simulator_has_its_own_restart_quota_and_a_crash_during_reset_is_restarted(
+        tmp_path, basic_config, worker0_crash_after, env_no_proxy):
+    """Two simulators, default limits (1 restart per 60 s, as ML-Agents counts them: per worker).
+    The first launch of worker 0 dies during the initial RESET (0) or after 150 steps, worker 1's
+    after 200 steps; both are restarted once and training finishes."""
+    port = free_port_block(2)
+    game = tmp_path / "Flaky2.x86_64"
+    game.write_text(textwrap.dedent(f"""\
+        #!/bin/sh
+        port=""; prev=""
+        for a; do [ "$prev" = --mlagents-port ] && port="$a"; prev="$a"; done
+        mark="{tmp_path}/crashed-$port"
+        if [ ! -f "$mark" ]; then
+          touch "$mark"
+          [ "$port" = "{port}" ] && after={worker0_crash_after} || after=200
+          exec "{sys.executable}" -m unity_stub_env.cli --task basic --crash-after $after "$@"
+        fi
+        exec "{sys.executable}" -m unity_stub_env.cli --task basic "$@"
+        """))
+    game.chmod(0o755)
+    r = learn([str(basic_config(max_steps=900)), "--env", str(tmp_path / "Flaky2"), "--num-envs", "2",
+               "--run-id", "q", "--timeout-wait", "10", "--results-dir", str(tmp_path / "results"),
+               "--base-port", str(port)], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert sorted(p.name for p in tmp_path.glob("crashed-*")) == [f"crashed-{port}", f"crashed-{port + 1}"]
+    restarts = [line for line in r.stdout.splitlines() if "restarting it and resetting all environments" in line]
+    assert [line.split("Worker ")[1][0] for line in restarts] == ["0", "1"]
+    status = json.loads((tmp_path / "results/q/run_logs/training_status.json").read_text())
     assert status["Basic"]["final_checkpoint"]["steps"] > 900
 
 

@@ -306,7 +306,7 @@ class SimulatorProcess:
 # Restarts
 # --------------------------------------------------------------------------------------------
 class RestartPolicy:
-    """Whether a crashed simulator may be restarted (spec §1.3), per worker.
+    """Whether a crashed simulator may be restarted (spec §1.3); the pool keeps one per worker.
 
     A restart is allowed while fewer than ``max_lifetime_restarts`` restarts happened in total
     (-1: unlimited) and fewer than ``rate_limit_n`` happened in the last ``rate_limit_period_s``

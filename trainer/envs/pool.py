@@ -113,8 +113,10 @@ class EnvPool:
         spin_wait = spin_budget(settings.num_envs + 1)
         self.workers = [_Worker(i, settings, env_path, spin_wait) for i in range(settings.num_envs)]
         self._initial_side_channel = initial_side_channel
-        self._restarts = RestartPolicy(settings.max_lifetime_restarts, settings.restarts_rate_limit_n,
-                                       settings.restarts_rate_limit_period_s)
+        # each worker has its own restart quota, as in ML-Agents: two simulators that crash in the
+        # same minute are both restarted under the default limit of 1 per 60 s
+        self._restarts = [RestartPolicy(settings.max_lifetime_restarts, settings.restarts_rate_limit_n,
+                                        settings.restarts_rate_limit_period_s) for _ in self.workers]
 
     @property
     def num_envs(self) -> int:
@@ -151,10 +153,12 @@ class EnvPool:
             raise
 
     def reset(self, side_channel: bytes | list[bytes]) -> list[StepResult]:
+        """RESET every worker; a simulator that dies meanwhile is restarted like in ``receive``."""
         chans = self._per_worker(side_channel)
         for w, sc in zip(self.workers, chans):
             w.endpoint.send_reset(sc)
-        return [w.endpoint.receive() for w in self.workers]
+        results, failed = self._receive_all()
+        return self._recover(failed) if failed else results
 
     def step(self, actions: list[dict[str, ActionTuple]], side_channel: bytes | list[bytes]) -> PoolStep:
         self.send_step(actions, side_channel)
@@ -168,6 +172,13 @@ class EnvPool:
 
     def receive(self) -> PoolStep:
         """Wait for every worker's next message (restarting a dead simulator if allowed)."""
+        results, failed = self._receive_all()
+        if not failed:
+            return PoolStep(results)
+        return PoolStep(self._recover(failed), restarted=True)
+
+    def _receive_all(self) -> tuple[list[StepResult], list[tuple[_Worker, Exception]]]:
+        """Every worker's next message; the workers whose simulator died or went silent apart."""
         results: list[StepResult] = []
         failed: list[tuple[_Worker, Exception]] = []
         for w in self.workers:
@@ -175,17 +186,23 @@ class EnvPool:
                 results.append(w.endpoint.receive())
             except (SimulatorExitedError, UnityTimeOutError) as err:
                 failed.append((w, err))
-        if not failed:
-            return PoolStep(results)
-        for w, err in failed:
-            if w.process is None or not self._restarts.allow_restart(time.monotonic()):
-                raise err
-            logger.warning("Worker %d failed (%s); restarting it and resetting all environments.",
-                           w.worker_id, err)
-            self._restart_process(w)
-        # every worker now waits for an answer (the healthy ones to their last message, the
-        # restarted ones on their first RESET): reset them all with a fresh configuration
-        return PoolStep(self.reset([self._initial_side_channel()] * self.num_envs), restarted=True)
+        return results, failed
+
+    def _recover(self, failed: list[tuple[_Worker, Exception]]) -> list[StepResult]:
+        """Restart the failed simulators, each within its own quota (else its error is raised),
+        then RESET every worker with a fresh configuration: the healthy ones wait for an answer to
+        their last message, the restarted ones for their first RESET. Repeats if one dies again."""
+        while failed:
+            for w, err in failed:
+                if w.process is None or not self._restarts[w.worker_id].allow_restart(time.monotonic()):
+                    raise err
+                logger.warning("Worker %d failed (%s); restarting it and resetting all environments.",
+                               w.worker_id, err)
+                self._restart_process(w)
+            for w in self.workers:
+                w.endpoint.send_reset(self._initial_side_channel())
+            results, failed = self._receive_all()
+        return results
 
     def _restart_process(self, failed: _Worker) -> None:
         failed.close(timeout=2.0)
