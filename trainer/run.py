@@ -335,6 +335,12 @@ class RunState:
                                  float(np.mean(list(rewards)[-100:])) if rewards else None)
 
 
+def make_routers(num_envs: int) -> list[sc.SideChannelRouter]:
+    """One side-channel router per simulator; an unknown channel id is warned about once per run."""
+    warned: set = set()
+    return [sc.SideChannelRouter(warned) for _ in range(num_envs)]
+
+
 def configure_torch_threads() -> None:
     """One intra-op thread unless MLAGENTS_LIKE_TORCH_THREADS says otherwise: the simulators run
     in other processes on the same cores, and for the small networks RL uses, torch's thread
@@ -393,7 +399,7 @@ def run_training(options) -> int:
     reporter = StatsReporter([tb, ConsoleWriter(logger, progress=progress), GaugeWriter(timers)])
     write_run_options(options, run_dir)
     state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
-                     [sc.SideChannelRouter() for _ in range(env.num_envs)])
+                     make_routers(env.num_envs))
     for line in params.describe():
         logger.info(line)
     try:

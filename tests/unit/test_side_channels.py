@@ -287,3 +287,15 @@ def test_environment_initialized_hashes_behavior_names():
     options = json.loads(msg.run_options)
     assert options["behaviors"] == {_expected_hash("Walker"): {"trainer_type": "ppo"}}
     assert options["environment_parameters"] == {_expected_hash("gravity"): {"curriculum": [{"name": _expected_hash("L1")}]}}
+
+
+def test_a_runs_simulators_warn_about_an_unknown_channel_once_between_them(caplog):
+    from trainer.run import make_routers
+
+    unknown = uuid.UUID("00000000-0000-0000-0000-0000000000cc")
+    data = sc.pack_messages([(unknown, b"x")])
+    routers = make_routers(3)
+    with caplog.at_level(logging.WARNING, logger="mlagents_like"):
+        for router in routers * 2:
+            assert router.dispatch(data).raw == {}
+    assert [r.getMessage().count(str(unknown)) for r in caplog.records] == [1]

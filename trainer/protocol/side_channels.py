@@ -239,13 +239,14 @@ class IncomingSideChannelData:
 class SideChannelRouter:
     """Trainer side: queues outgoing messages and decodes incoming ones.
 
-    Not thread-safe on its own; one router belongs to one simulator connection.
+    Not thread-safe on its own; one router belongs to one simulator connection. Routers given
+    the same ``warned_ids`` set (one run's simulators) warn about an unknown channel id once between them.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, warned_ids: set[uuid.UUID] | None = None) -> None:
         self._outgoing: list[tuple[uuid.UUID, bytes]] = []
         self._raw_callbacks: dict[uuid.UUID, Callable[[bytes], None] | None] = {}
-        self._warned_ids: set[uuid.UUID] = set()
+        self._warned_ids: set[uuid.UUID] = set() if warned_ids is None else warned_ids
 
     def queue(self, channel_id: uuid.UUID, payload: bytes) -> None:
         """Queue one message; it leaves with the next ``drain()``."""
