@@ -13,6 +13,12 @@ stamp="$venv/.interop-stamp"
 want="mlagents-1.1.0-torch-2.13.0-v2"
 if [ -x "$venv/bin/python" ] && [ "$(cat "$stamp" 2>/dev/null)" = "$want" ]; then exit 0; fi
 py="${PYTHON:-python3}"
+# numpy 1.23.5 (ML-Agents 1.1.0's pin) has wheels up to Python 3.11 only
+if ! "$py" -c 'import sys; sys.exit(0 if sys.version_info < (3, 12) else 1)'; then
+  echo "ensure_interop_venv.sh: the ML-Agents 1.1.0 interop peer needs Python 3.10 or 3.11 (numpy 1.23.5);" \
+       "$("$py" --version 2>&1) found. Set PYTHON=/path/to/python3.11 and run ./test.sh again." >&2
+  exit 2
+fi
 rm -rf "$venv"
 "$py" -m venv "$venv"
 wheels="$(mktemp -d)"

@@ -9,7 +9,8 @@ py="${PYTHON:-python3}"
 stamp=.venv/.mlagents-like-stamp
 want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
-  # torch first and pinned: a bare 'torch' requirement would pull a multi-GB CUDA build.
+  # torch first and pinned: on this project's machines pip takes 2.13.0's CPU wheel from local
+  # disk; a bare 'torch' requirement would pull a multi-GB CUDA build from PyPI.
   .venv/bin/python -m pip install -q --upgrade pip
   .venv/bin/python -m pip show torch >/dev/null 2>&1 || .venv/bin/python -m pip install -q "torch==2.13.0"
   .venv/bin/python -m pip install -q -e ".[test]"
