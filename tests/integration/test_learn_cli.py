@@ -8,6 +8,7 @@ import json
 import os
 import signal
 import socket
+import subprocess
 import sys
 
 import pytest
@@ -295,3 +296,39 @@ def test_extrinsic_reward_and_timers_gauges_as_mlagents(tmp_path, basic_config, 
     assert gauges["Basic.Step.mean"]["count"] == 3 and 900 <= gauges["Basic.Step.mean"]["value"] < 1000
     assert gauges["Basic.Environment.CumulativeReward.mean"]["value"] == pytest.approx(returns[900], rel=1e-6)
     assert gauges["Basic.Policy.ExtrinsicReward.mean"]["count"] == 3
+
+
+def test_editor_mode_listens_on_5004_and_trains_the_player_that_connects(tmp_path, basic_config, env_no_proxy):
+    """No --env: the trainer says it waits on 5004 (--base-port is for built players only); a
+    'Play' (here the stub, started by hand on 5004, as the Editor would connect) is trained."""
+    with socket.socket() as probe:
+        try:
+            probe.bind(("127.0.0.1", 5004))
+        except OSError:
+            pytest.skip("port 5004 (the Editor's) is taken on this machine")
+    cmd = [sys.executable, "-m", "trainer.cli", str(basic_config(max_steps=300, interval=300)),
+           "--run-id", "editor", "--results-dir", str(tmp_path / "results"),
+           "--base-port", str(free_port_block()), "--timeout-wait", "60"]
+    trainer = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                               env=env_no_proxy)
+    player = None
+    try:
+        lines = []
+        for line in trainer.stdout:
+            lines.append(line)
+            if "Listening on port 5004" in line:
+                break
+        assert "Start training by pressing the Play button" in "".join(lines), "".join(lines)
+        player = subprocess.Popen([sys.executable, "-m", "unity_stub_env.cli", "--task", "basic",
+                                   "--mlagents-port", "5004", "-logFile", str(tmp_path / "editor.log")],
+                                  cwd=tmp_path, env=env_no_proxy)
+        out, _ = trainer.communicate(timeout=120)
+        assert trainer.returncode == 0, out[-3000:]
+        assert player.wait(timeout=30) == 0  # the trainer ended the session with status 400
+    finally:
+        for proc in (trainer, player):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+    assert (tmp_path / "results" / "editor" / "Basic.onnx").is_file()
+    status = json.loads((tmp_path / "results" / "editor" / "run_logs" / "training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] > 300
