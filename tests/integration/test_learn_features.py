@@ -52,15 +52,20 @@ def test_two_envs_curriculum_and_simulator_stats(tmp_path, env_no_proxy):
     assert "Environment reset by the trainer" in logs
 
 
-def _flaky_game(tmp_path, crash_after: int) -> str:
-    """A 'Unity build' whose first launch crashes after a few exchanges; later launches are fine."""
-    mark = tmp_path / "crashed-once"
+def _flaky_game(tmp_path, crash_after: int, first_port: int | None = None, first_port_crash_after: int = 0) -> str:
+    """A 'Unity build' whose first launch on each port crashes after ``crash_after`` exchanges
+    (``first_port_crash_after`` on ``first_port``); later launches are fine. Each crash leaves
+    a ``crashed-<port>`` mark in ``tmp_path``."""
     game = tmp_path / "Flaky.x86_64"
     game.write_text(textwrap.dedent(f"""\
         #!/bin/sh
-        if [ ! -f "{mark}" ]; then
-          touch "{mark}"
-          exec "{sys.executable}" -m unity_stub_env.cli --task basic --crash-after {crash_after} "$@"
+        port=""; prev=""
+        for a; do [ "$prev" = --mlagents-port ] && port="$a"; prev="$a"; done
+        mark="{tmp_path}/crashed-$port"
+        if [ ! -f "$mark" ]; then
+          touch "$mark"
+          [ "$port" = "{first_port}" ] && after={first_port_crash_after} || after={crash_after}
+          exec "{sys.executable}" -m unity_stub_env.cli --task basic --crash-after $after "$@"
         fi
         exec "{sys.executable}" -m unity_stub_env.cli --task basic "$@"
         """))
@@ -86,21 +91,8 @@ def test_each_simulator_has_its_own_restart_quota_and_a_crash_during_reset_is_re
     The first launch of worker 0 dies during the initial RESET (0) or after 150 steps, worker 1's
     after 200 steps; both are restarted once and training finishes."""
     port = free_port_block(2)
-    game = tmp_path / "Flaky2.x86_64"
-    game.write_text(textwrap.dedent(f"""\
-        #!/bin/sh
-        port=""; prev=""
-        for a; do [ "$prev" = --mlagents-port ] && port="$a"; prev="$a"; done
-        mark="{tmp_path}/crashed-$port"
-        if [ ! -f "$mark" ]; then
-          touch "$mark"
-          [ "$port" = "{port}" ] && after={worker0_crash_after} || after=200
-          exec "{sys.executable}" -m unity_stub_env.cli --task basic --crash-after $after "$@"
-        fi
-        exec "{sys.executable}" -m unity_stub_env.cli --task basic "$@"
-        """))
-    game.chmod(0o755)
-    r = learn([str(basic_config(max_steps=900)), "--env", str(tmp_path / "Flaky2"), "--num-envs", "2",
+    game = _flaky_game(tmp_path, crash_after=200, first_port=port, first_port_crash_after=worker0_crash_after)
+    r = learn([str(basic_config(max_steps=900)), "--env", game, "--num-envs", "2",
                "--run-id", "q", "--timeout-wait", "10", "--results-dir", str(tmp_path / "results"),
                "--base-port", str(port)], cwd=tmp_path, env=env_no_proxy)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
