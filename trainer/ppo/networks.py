@@ -156,7 +156,7 @@ class Actor(nn.Module):
         offsets = [0]
         for size in action_spec.discrete_branches:
             offsets.append(offsets[-1] + size)
-        self._mask_offsets = offsets
+        self.mask_offsets = offsets  # branch b's columns of the action mask: offsets[b]:offsets[b + 1]
 
     def heads(self, observations: Sequence[torch.Tensor], allowed: torch.Tensor | None
               ) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
@@ -181,7 +181,7 @@ class Actor(nn.Module):
         for index, branch in enumerate(self.discrete_branches):
             branch_logits = branch(encoding)
             if allowed is not None:
-                start, end = self._mask_offsets[index], self._mask_offsets[index + 1]
+                start, end = self.mask_offsets[index], self.mask_offsets[index + 1]
                 branch_logits = mask_logits(branch_logits, allowed[:, start:end])
             logits.append(branch_logits)
         return mu, logits
