@@ -46,6 +46,8 @@ class LSTMMemory(nn.Module):
                         block.zero_()
                 if "bias" in name:
                     param.data[self.hidden_size:2 * self.hidden_size] += self.FORGET_BIAS
+        for name in ("weight_ih_l0", "weight_hh_l0"):  # stored input-major, as Linear kernels (layers.py)
+            setattr(self.lstm, name, nn.Parameter(getattr(self.lstm, name).detach().t().contiguous().t()))
 
     def forward(self, inputs: torch.Tensor, memories: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """inputs [n_seq, L, in], memories [1, n_seq, m] -> (outputs [n_seq, L, m/2], memories [1, n_seq, m])."""
