@@ -23,10 +23,13 @@ The critic's half in a forked child (``_CriticChild``): while the trainer update
 wait for its actions, so the second CPU is idle. The actor's and the critic's halves of the steps
 touch disjoint parameters, so the child steps the critic while the parent steps the actor, and
 the result is bit for bit that of one process. Measured again 2026-11-25 (ball3d-sized update:
-12000 experiences, 3 epochs of 64-row minibatches, 2 x 128 units; min of 5; 1 BLAS thread as
-the trainer runs; 2 vCPUs with other jobs on the machine, load ~1.3): 0.33 s in one process,
-0.18 s with the child. It pays only with an idle second CPU: with 2 BLAS threads per process the
-two processes oversubscribe the CPUs and the same update took 0.66 s. A child that dies, or
+12000 experiences, 3 epochs of 64-row minibatches, 2 x 128 units; wall time, min of 5; 1 BLAS
+thread as the trainer runs; 2 vCPUs shared with other jobs): with the second CPU mostly idle
+(load ~1.3) 0.33 s in one process, 0.18 s with the child; with it busy (load ~2) 0.32-0.33 s
+against 0.30-0.37 s, no gain. It pays only with an idle second CPU, which is what the simulators
+leave during an update on a machine of our own (training runs measured 0.55 -> 0.32-0.40 s);
+with 2 BLAS threads per process the two processes oversubscribe the CPUs (0.66 s). The
+end-to-end effect still has to be measured on a quiet machine. A child that dies, or
 does not finish within max(FORK_TIMEOUT_MIN, FORK_TIMEOUT_FACTOR x the parent's own half),
 is killed and reaped; the parent then steps the critic itself (its critic is untouched until a
 child's result is copied in), says so once, and stops forking for the rest of the run.
@@ -57,7 +60,7 @@ _TWO_PI_E = 2 * math.pi * math.e
 
 # rows x critic parameters of an update below which forking costs more than it saves: the fork
 # of a ~250 MB trainer takes ~8 ms. Measured on 2 vCPUs: basic (24 minibatches x 32 rows, 461
-# critic parameters) 12 -> 20 ms per update; ball3d (562 x 64 rows, 17.7k) 0.33 -> 0.18 s.
+# critic parameters) 12 -> 20 ms per update; ball3d (562 x 64 rows, 17.7k) 0.33 -> 0.18 s (see above).
 FORK_MIN_WORK = 50e6
 FORK_TIMEOUT_MIN = 30.0  # seconds a child may take at least ...
 FORK_TIMEOUT_FACTOR = 5.0  # ... or this many times the parent's half of the same update
