@@ -147,8 +147,10 @@ def test_pings_are_acknowledged_and_settings_acked():
             received = sock.recv(65536)
         assert http2.frame(http2.SETTINGS, http2.ACK, 0) in received
         assert http2.frame(http2.PING, http2.ACK, 0, b"12345678") in received
-        # our own SETTINGS: a 2^31-1 stream window and 2^24-1 frames; then the connection window
-        assert received.startswith(http2.frame(http2.SETTINGS, 0, 0, struct.pack(">HIHI", 4, 2**31 - 1, 5, 2**24 - 1)))
+        # our own SETTINGS: no push, 16 calls at once, a 2^31-1 stream window, 1 MiB frames,
+        # 64 KiB of headers; then the connection window
+        assert received.startswith(http2.frame(http2.SETTINGS, 0, 0, struct.pack(
+            ">HIHIHIHIHI", 2, 0, 3, 16, 4, 2**31 - 1, 5, 2**20, 6, 2**16)))
     finally:
         transport.close(grace=0.2)
 
@@ -248,9 +250,10 @@ def test_endless_header_blocks_close_the_connection_instead_of_growing():
     try:
         with socket.create_connection(("127.0.0.1", transport.port), timeout=5) as sock:
             chunk = http2.frame(http2.CONTINUATION, 0, 1, b"\x00" * 65536)
-            sock.sendall(http2.PREFACE + http2.frame(http2.HEADERS, 0, 1, b"\x00" * 65536))
+            sock.sendall(http2.PREFACE + http2.frame(http2.SETTINGS, 0, 0)
+                         + http2.frame(http2.HEADERS, 0, 1, b"\x00" * 16384))
             received = b""
-            for _ in range(20):  # 20 x 64 KiB > the 1 MiB limit
+            for _ in range(20):  # 20 x 64 KiB > the 64 KiB limit
                 try:
                     sock.sendall(chunk)
                 except OSError:
