@@ -39,6 +39,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from trainer.protocol import http2  # noqa: E402
+from unity_stub_env.http2_client import request_headers  # noqa: E402
 from trainer.protocol.server import EXCHANGE_PATH, MAX_MESSAGE_BYTES, _GrpcioTransport  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "out"
@@ -113,7 +114,7 @@ def bench_server(kind: str, request_size: int, answer_size: int, exchanges: int,
                                http2.SETTINGS_MAX_FRAME_SIZE, http2.OUR_MAX_FRAME)
         sock.sendall(http2.PREFACE + http2.frame(http2.SETTINGS, 0, 0, settings)
                      + http2.frame(http2.WINDOW_UPDATE, 0, 0, struct.pack(">I", http2.MAX_WINDOW - 65535)))
-        headers = http2.request_headers(EXCHANGE_PATH, f"127.0.0.1:{transport.port}".encode())
+        headers = request_headers(EXCHANGE_PATH, f"127.0.0.1:{transport.port}".encode())
         message, answer = b"\x07" * request_size, b"\x08" * answer_size
         buffer = bytearray()
         stream_id = 1
@@ -150,7 +151,7 @@ def run_client(port: int, kind: str, request_size: int, calls: int) -> None:
             exchange(message, timeout=30)
         channel.close()
         return
-    from trainer.protocol.http2 import Http2Channel
+    from unity_stub_env.http2_client import Http2Channel
 
     channel = Http2Channel("127.0.0.1", port, EXCHANGE_PATH)
     deadline = time.monotonic() + 30

@@ -28,7 +28,7 @@ from protos.communicator_objects import (
 from trainer.protocol import side_channels as sc
 from trainer.protocol import wire
 from trainer.protocol.codec import HEADER_OK_FIELD, all_true_capabilities
-from trainer.protocol.http2 import CallError, Http2Channel
+from unity_stub_env.http2_client import CallError, Http2Channel
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
 logger = logging.getLogger("unity_stub_env")

@@ -26,6 +26,7 @@ from trainer.protocol.http2 import (
     PRIORITY_FLAG, PUSH_PROMISE, RST_STREAM, SETTINGS, WINDOW_UPDATE, frame,
 )
 from trainer.protocol.server import EXCHANGE_PATH, UnityEndpoint
+from unity_stub_env.http2_client import request_headers
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -33,7 +34,7 @@ PROTOCOL, FLOW, STREAM_CLOSED, FRAME_SIZE = 0x1, 0x3, 0x5, 0x6
 REFUSED, COMPRESSION, CALM = 0x7, 0x9, 0xB
 HELLO = b"\x00" + struct.pack(">I", 5) + b"hello"  # one gRPC message
 PREAMBLE = http2.PREFACE + frame(SETTINGS, 0, 0)
-HEADER_BLOCK = http2.request_headers(EXCHANGE_PATH, b"127.0.0.1")
+HEADER_BLOCK = request_headers(EXCHANGE_PATH, b"127.0.0.1")
 
 
 def headers(stream_id: int, end_stream: bool = False, block: bytes = HEADER_BLOCK) -> bytes:
