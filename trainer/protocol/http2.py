@@ -651,13 +651,8 @@ class _Connection:
                     continue
         except OSError:
             pass
-        self.pending.clear()
-        self.closed = True
-        self.transport.connection_closed(self)
-        try:
-            self.sock.close()
-        except OSError:
-            pass
+        self.pending.clear()  # answered with 400 by the endpoint already; nothing to cancel
+        self.drop("the server closed")
 
 
 def _strip_padding(flags: int, payload: bytes) -> bytes:
