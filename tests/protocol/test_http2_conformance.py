@@ -207,6 +207,21 @@ def test_goaway_names_the_last_stream_it_took(transport):
     assert (last, code) == (3, FRAME_SIZE)
 
 
+def test_data_beyond_the_connection_window_we_granted_is_a_flow_control_error(transport, caplog):
+    """We grant 2^31-1 bytes and top it up once half is used; to reach the limit without sending
+    2 GB, the server's record of what is left is lowered to 10 bytes before 11 arrive."""
+    client = Client(transport)
+    client.send(headers(1)).pump()
+    (connection,) = transport._connections.values()
+    connection.recv_window = 10
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2"):
+        client.send(frame(DATA, 0, 1, b"x" * 11)).pump()
+    frames = client.frames(until_closed=True)
+    (payload,) = [p for kind, _, _, p in frames if kind == GOAWAY]
+    assert struct.unpack_from(">II", payload) == (1, FLOW) and b"beyond the connection's flow-control window" in payload
+    assert "beyond the connection's flow-control window" in caplog.text
+
+
 def test_a_dropped_connection_cancels_the_call_it_had_made(transport):
     client = Client(transport)
     (call,) = client.send(request(1)).pump()
