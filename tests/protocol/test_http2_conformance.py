@@ -76,7 +76,7 @@ class Client:
         self.sock.sendall(data)
         return self
 
-    def pump(self, rounds: int = 5) -> list:
+    def pump(self, rounds: int = 2) -> list:
         for _ in range(rounds):
             call = self.transport.take(0.05)
             if call is not None:
