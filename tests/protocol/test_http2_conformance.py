@@ -317,6 +317,22 @@ def test_bad_grpc_messages_get_a_grpc_status_and_never_reach_the_trainer(transpo
     client.close()
 
 
+def test_late_window_update_rst_stream_and_priority_on_a_closed_stream_are_ignored(transport, caplog):
+    """RFC 9113 §5.1: they may cross our END_STREAM on the wire; no reaction, the connection serves on."""
+    client = Client(transport)
+    (call,) = client.send(request(1)).pump()
+    call.answer(b"first")
+    client.frames(until_closed=False)
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2"):
+        client.send(window_update(1, 100) + frame(PRIORITY, 0, 1, b"\0" * 5) + CANCEL_1 + request(3)).pump()
+    assert [c.stream_id for c in client.calls] == [1, 3] and not transport.client_gone
+    assert caplog.records == []
+    client.calls[1].answer(b"second")
+    sent = [(kind, sid) for kind, _, sid, _ in client.frames(until_closed=False)]
+    assert sent == [(HEADERS, 3), (DATA, 3), (HEADERS, 3)]
+    client.close()
+
+
 def test_unknown_frame_types_are_ignored(transport):
     client = Client(transport)
     (call,) = client.send(frame(0x20, 0xFF, 0, b"whatever") + frame(0x21, 0, 7) + request(1)).pump()
