@@ -38,7 +38,7 @@ sys.path.insert(0, str(REPO))
 from trainer.protocol.server import UnityEndpoint  # noqa: E402
 from unity_stub_env.launcher import write_player_launcher
 from unity_stub_env import make_task  # noqa: E402
-from trainer.protocol.pacing import spin_budget, stub_args  # noqa: E402
+from protos.pacing import spin_budget, stub_args  # noqa: E402
 
 INTEROP_PYTHON = REPO / ".venv-interop" / "bin" / "python"
 PEER = Path(__file__).resolve().parent / "peers" / "mlagents_envs_rollout.py"

@@ -9,7 +9,7 @@ One run trains the same stub task with the same YAML twice, one process after th
                  launcher that execs this interpreter's ``-m unity_stub_env.cli --task TASK``.
 Both get the same ``--seed``, ``--num-areas``, a fresh results dir and a fresh port, and the same
 simulator: the launcher passes the stub the ``--spin-wait-ms`` that our trainer passes it for one
-environment on this machine (trainer/protocol/pacing.py).
+environment on this machine (protos/pacing.py).
 
 The YAML is copied to a temp dir and, for BOTH trainers alike, ``max_steps`` is overridden when
 ``--max-steps`` is given and ``checkpoint_interval`` is raised above ``max_steps``: mlagents 1.1.0
@@ -50,7 +50,7 @@ from pathlib import Path
 
 import yaml
 
-from trainer.protocol.pacing import spin_budget, stub_args
+from protos.pacing import spin_budget, stub_args
 from unity_stub_env.launcher import write_player_launcher
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 

@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         from trainer.config.support import check_supported
 
         check_supported(options)  # before the results folder or a simulator exists
-        from trainer.protocol.pacing import configured_spin
+        from protos.pacing import configured_spin
 
         configured_spin()  # a bad MLAGENTS_LIKE_SPIN_WAIT_MS is refused before the results folder exists
         print(LOGO)

@@ -18,7 +18,7 @@ import signal
 import sys
 
 from trainer.fast_exit import exit_now
-from trainer.protocol.pacing import stub_args
+from protos.pacing import stub_args
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter, build_brain_parameters
 from unity_stub_env.launcher import write_player_launcher

@@ -28,7 +28,7 @@ from protos.communicator_objects import (
 from trainer.protocol import side_channels as sc
 from trainer.protocol import wire
 from trainer.protocol.codec import HEADER_OK_FIELD, all_true_capabilities
-from trainer.protocol.http2 import CallError, Http2Channel
+from protos.http2 import CallError, Http2Channel
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
 logger = logging.getLogger("unity_stub_env")
@@ -131,7 +131,7 @@ class RpcCommunicator:
         self.address = f"localhost:{port}"
         self.port = port
         self.connect_timeout = float(connect_timeout)
-        self.spin_wait = float(spin_wait)  # s; see trainer/protocol/pacing.py
+        self.spin_wait = float(spin_wait)  # s; see protos/pacing.py
         self.stop_requested = False
         self._channel = None
         self._sent_brain_keys: set[str] = set()

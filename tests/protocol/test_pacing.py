@@ -1,13 +1,13 @@
-"""PacedWait (trainer/protocol/pacing.py): when a waiter blocks and when it polls, by hand."""
+"""PacedWait (protos/pacing.py): when a waiter blocks and when it polls, by hand."""
 from __future__ import annotations
 
 import os
 
 import pytest
 
-from trainer.protocol import pacing
+from protos import pacing
 from trainer.errors import ConfigError
-from trainer.protocol.pacing import LEAD_S, PacedWait, configured_spin, spin_budget, wait_paced
+from protos.pacing import LEAD_S, PacedWait, configured_spin, spin_budget, wait_paced
 
 
 @pytest.fixture

@@ -80,7 +80,7 @@ def test_many_agents_are_decoded_from_bytes_once_and_equal_a_full_parse(endpoint
 
 def test_polling_on_both_ends_changes_nothing_but_the_waiting(launch, tmp_path):
     """The endpoint and the stub both poll for each other's answers (--spin-wait-ms,
-    trainer/protocol/pacing.py): the steps are the same as with plain blocking, the waits are
+    protos/pacing.py): the steps are the same as with plain blocking, the waits are
     timed, and the stub reports at exit how many answers polling found."""
     actions = [np.array([[a], [2 - a]], np.int32) for a in (2, 2, 1, 0, 2, 2, 2, 2, 0, 1) * 3]
     runs = []

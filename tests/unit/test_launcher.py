@@ -173,7 +173,7 @@ def test_stub_is_told_to_poll_and_a_unity_build_never_is():
 @pytest.mark.parametrize("cpus, expected", [(1, 0.0), (2, 0.0), (3, 0.001)])
 def test_pool_polls_only_with_a_cpu_for_the_trainer_and_each_simulator(monkeypatch, cpus, expected):
     from trainer.envs.pool import EnvPool, PoolSettings
-    from trainer.protocol import pacing
+    from protos import pacing
 
     monkeypatch.setattr(pacing, "usable_cpus", lambda: cpus)
     monkeypatch.delenv(pacing.SPIN_WAIT_ENV, raising=False)

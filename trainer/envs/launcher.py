@@ -16,7 +16,7 @@ from collections import deque
 from typing import IO
 
 from trainer.errors import ConfigError, EnvironmentNotFoundError
-from trainer.protocol.pacing import stub_args
+from protos.pacing import stub_args
 
 logger = logging.getLogger("mlagents_like")
 

@@ -4,7 +4,7 @@ The simulator (Unity or unity-stub-env) is the gRPC client: every message it sen
 of an ``Exchange`` call, and the trainer's next message is that call's response. Two transports
 carry the calls, both handing the trainer raw request bytes that it parses once, on its thread:
 
-* ``http2`` (default): ``trainer.protocol.http2``, a single-threaded HTTP/2 server; the
+* ``http2`` (default): ``protos.http2``, a single-threaded HTTP/2 server; the
   trainer's thread reads requests off the socket and writes answers itself.
 * ``grpcio`` (``MLAGENTS_LIKE_TRANSPORT=grpcio``): grpcio's server; a servicer thread parks each
   call in a slot until the trainer answers it. Kept as a fallback and as the reference the
@@ -39,7 +39,7 @@ from trainer.errors import (
     UnityTimeOutError,
 )
 from trainer.protocol import codec, records
-from trainer.protocol.http2 import GRPC_INTERNAL, Http2Transport
+from protos.http2 import GRPC_INTERNAL, Http2Transport
 from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
 from trainer.stop import STOP
 
@@ -226,7 +226,7 @@ class UnityEndpoint:
         """``describe``: names the simulator in errors (a callable is asked when the error
         happens, so it can say how the process ended). ``spin_wait`` (s): poll for the simulator's
         next call up to this long past when it is due instead of sleeping through it
-        (trainer/protocol/pacing.py; HTTP/2 transport only)."""
+        (protos/pacing.py; HTTP/2 transport only)."""
         self.port = port
         self.bind = bind
         self.timeout_wait = float(timeout_wait)
