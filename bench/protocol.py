@@ -36,9 +36,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from trainer.protocol.server import UnityEndpoint  # noqa: E402
-from unity_stub_env.launcher import write_player_launcher
+from unity_stub_env.launcher import spin_wait_args, write_player_launcher  # noqa: E402
 from unity_stub_env import make_task  # noqa: E402
-from protos.pacing import spin_budget, stub_args  # noqa: E402
+from trainer.envs.cpus import spin_budget  # noqa: E402
 
 INTEROP_PYTHON = REPO / ".venv-interop" / "bin" / "python"
 PEER = Path(__file__).resolve().parent / "peers" / "mlagents_envs_rollout.py"
@@ -47,7 +47,7 @@ AGENTS_PER_AREA = {"basic": 1, "ball3d": 12}
 # as mlagents-like-learn decides for one simulator; the stub gets the same flag under
 # mlagents_envs (ii), so both trainers face the same simulator
 SPIN_WAIT = spin_budget(2)
-STUB_FLAGS = stub_args(SPIN_WAIT)
+STUB_FLAGS = spin_wait_args(SPIN_WAIT)
 
 
 def free_port() -> int:
@@ -160,7 +160,8 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     transport plus thread/process hand-offs.
     """
     from protos.communicator_objects import unity_message_pb2
-    from trainer.protocol import codec, records
+    from protos import records
+    from trainer.protocol import codec
     from unity_stub_env.academy import Academy
     from unity_stub_env.agents import build_brain_parameters
     from unity_stub_env.communicator import step_message_bytes

@@ -20,7 +20,7 @@ from trainer.errors import UserError
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.trainer import PPOTrainer
-from trainer.protocol.types import BehaviorSpec
+from protos.types import BehaviorSpec
 
 logger = logging.getLogger("mlagents_like")
 

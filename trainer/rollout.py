@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from trainer.ppo.buffer import Trajectory
-from trainer.protocol.types import BehaviorSpec, DecisionSteps, TerminalSteps
+from protos.types import BehaviorSpec, DecisionSteps, TerminalSteps
 
 
 @dataclass

@@ -33,8 +33,8 @@ from trainer.config.param_manager import EnvironmentParameterManager
 from trainer.config.support import goal_conditioning_note
 from trainer.envs.pool import EnvPool, PoolSettings
 from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
-from trainer.protocol import side_channels as sc
-from trainer.protocol.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
+from protos import side_channels as sc
+from protos.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer.rollout import AgentTracker, concat_masks
 from trainer.stop import STOP
 

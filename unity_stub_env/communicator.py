@@ -25,17 +25,16 @@ from protos.communicator_objects import (
     unity_output_pb2,
     unity_rl_initialization_output_pb2,
 )
-from trainer.protocol import side_channels as sc
-from trainer.protocol import wire
-from trainer.protocol.codec import HEADER_OK_FIELD, all_true_capabilities
+from protos import side_channels as sc
+from protos import wire
+from protos.versions import COMMUNICATION_VERSION as UNITY_COMMUNICATION_VERSION
+from protos.versions import UNITY_PACKAGE_VERSION, all_true_capabilities
 from protos.http2 import CallError, Http2Channel
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
 logger = logging.getLogger("unity_stub_env")
 
 ACADEMY_NAME = "AcademySingleton"
-UNITY_COMMUNICATION_VERSION = "1.5.0"
-UNITY_PACKAGE_VERSION = "3.0.0"
 STATUS_OK = 200
 STATUS_CLOSING = 400
 _CHANNEL_OPTIONS = [
@@ -280,7 +279,7 @@ def step_message_bytes(lists: list[tuple[str, bytes]], side_channel: bytes, brai
         init = unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
             brain_parameters=brain_parameters).SerializeToString()
         output += wire.len_prefix(2, len(init)) + init
-    return HEADER_OK_FIELD + wire.len_prefix(2, len(output)) + output
+    return wire.HEADER_OK_FIELD + wire.len_prefix(2, len(output)) + output
 
 
 # Side channels -------------------------------------------------------------------------------

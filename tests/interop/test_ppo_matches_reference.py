@@ -19,7 +19,7 @@ import torch
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer, normalize_advantages
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType,
 )
 

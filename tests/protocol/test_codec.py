@@ -16,10 +16,12 @@ from protos.communicator_objects import (
     unity_output_pb2,
 )
 from tests.protocol.conftest import agent_info, brain_params, png_bytes
-from trainer.errors import ProtocolError, UnityVersionError
+from protos.errors import ProtocolError
+from trainer.errors import UnityVersionError
+from protos.versions import all_true_capabilities
 from trainer.protocol import codec
 from trainer.protocol.png import split_concatenated_pngs
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     ActionTuple,
     BehaviorSpec,
@@ -388,7 +390,7 @@ def test_communication_version_table(version, ok):
 
 
 def test_capabilities_all_true():
-    caps = codec.all_true_capabilities()
+    caps = all_true_capabilities()
     assert [getattr(caps, f.name) for f in caps.DESCRIPTOR.fields] == [True] * 7
 
 

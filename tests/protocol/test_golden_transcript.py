@@ -19,12 +19,12 @@ import pytest
 
 from trainer.errors import UnityCommunicatorStoppedError
 from trainer.protocol.server import UnityEndpoint
-from trainer.protocol.side_channels import (
+from protos.side_channels import (
     ENGINE_CONFIG_CHANNEL_ID,
     SideChannelRouter,
     encode_engine_config,
 )
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     ActionTuple,
     DimensionProperty,

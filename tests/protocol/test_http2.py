@@ -11,7 +11,7 @@ import pytest
 
 from protos.communicator_objects import unity_message_pb2
 from tests.protocol.conftest import free_port, m1, m2
-from trainer.errors import ProtocolError
+from protos.errors import ProtocolError
 from protos import http2
 from trainer.protocol.server import EXCHANGE_PATH, UnityEndpoint
 

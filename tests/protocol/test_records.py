@@ -1,4 +1,4 @@
-"""Many AgentInfoProtos decoded from their bytes at once (trainer.protocol.records) must give
+"""Many AgentInfoProtos decoded from their bytes at once (protos.records) must give
 exactly what the agent-by-agent parse gives, and step aside whenever it cannot."""
 from __future__ import annotations
 
@@ -8,9 +8,10 @@ import pytest
 from protos.communicator_objects import agent_info_pb2, observation_pb2
 from tests.protocol.conftest import agent_info, brain_params
 from tests.protocol.test_codec import output_with
-from trainer.errors import ProtocolError
-from trainer.protocol import codec, records, wire
-from trainer.protocol.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
+from protos.errors import ProtocolError
+from protos import records, wire
+from trainer.protocol import codec
+from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 
 
 @pytest.fixture(autouse=True)

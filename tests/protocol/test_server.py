@@ -28,7 +28,7 @@ from trainer.errors import (
     UnityVersionError,
 )
 from trainer.protocol.server import TRANSPORT_ENV, TRANSPORTS, UnityEndpoint
-from trainer.protocol.types import ActionTuple
+from protos.types import ActionTuple
 
 pytestmark = pytest.mark.timeout(60)
 

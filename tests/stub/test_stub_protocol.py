@@ -14,8 +14,8 @@ from tests.stub.conftest import (
     init_answer,
     step_answer,
 )
-from trainer.protocol import side_channels as sc
-from trainer.protocol.types import StatsAggregationMethod
+from protos import side_channels as sc
+from protos.types import StatsAggregationMethod
 
 BASIC = "Basic?team=0"
 BALL = "3DBall?team=0"

@@ -16,7 +16,7 @@ from trainer.ppo.losses import masked_mean, policy_loss
 from trainer.ppo.networks import Actor
 from trainer.ppo.policy import Policy
 from trainer.ppo.trainer import PPOTrainer
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     BehaviorSpec,
     DecisionSteps,

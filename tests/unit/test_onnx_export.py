@@ -10,7 +10,7 @@ import torch
 from trainer.artifacts.onnx_export import export_policy
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.policy import Policy
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     BehaviorSpec,
     DimensionProperty,

@@ -5,7 +5,7 @@ import torch
 from trainer.ppo.fast_actor import NumpyActor, supports
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.networks import Actor
-from trainer.protocol.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
+from protos.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
 
 HP = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
 

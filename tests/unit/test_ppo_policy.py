@@ -9,7 +9,7 @@ import torch
 
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.policy import Policy
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     BehaviorSpec,
     DimensionProperty,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from trainer.config.settings import RunOptions, TrainerSettings
 from trainer.errors import ConfigError
-from trainer.protocol.types import ObservationType
+from protos.types import ObservationType
 
 # reward signals the PPO room computes (trainer/ppo/trainer.py checks the same list)
 SUPPORTED_REWARD_SIGNALS = ("extrinsic", "curiosity", "rnd")

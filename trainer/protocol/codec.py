@@ -1,7 +1,7 @@
 """Pure translation between the wire protos and numpy batches (spec §1.6, §3).
 
 Every Unity message is decoded exactly once, here, into the plain types of
-``trainer.protocol.types``; every answer is built here from ``ActionTuple`` batches. Nothing in
+``protos.types``; every answer is built here from ``ActionTuple`` batches. Nothing in
 this module does I/O or keeps state.
 """
 from __future__ import annotations
@@ -16,12 +16,14 @@ import numpy as np
 
 from google.protobuf.message import DecodeError
 
-from protos.communicator_objects import agent_info_pb2, capabilities_pb2, command_pb2, header_pb2, observation_pb2
+from protos.communicator_objects import agent_info_pb2, command_pb2, observation_pb2
 from protos.communicator_objects import unity_rl_input_pb2, unity_rl_output_pb2
-from trainer.errors import ProtocolError, UnityVersionError
-from trainer.protocol import records, wire
+from protos.errors import ProtocolError
+from trainer.errors import UnityVersionError
+from protos import records, wire
+from protos.versions import COMMUNICATION_VERSION, PACKAGE_VERSION
 from trainer.protocol.png import decode_png_observation
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     ActionTuple,
     BehaviorSpec,
@@ -33,8 +35,6 @@ from trainer.protocol.types import (
     TerminalSteps,
 )
 
-COMMUNICATION_VERSION = "1.5.0"
-PACKAGE_VERSION = "1.1.0"
 STEP = command_pb2.STEP
 RESET = command_pb2.RESET
 
@@ -52,19 +52,6 @@ _VERSION_RE = re.compile(r"(\d+)\.(\d+)(?:\.(\d+))?(?:[ab]\d+)?")  # StrictVersi
 
 
 # --------------------------------------------------------------------------- handshake helpers
-def all_true_capabilities() -> capabilities_pb2.UnityRLCapabilitiesProto:
-    """The capabilities the trainer reports: every feature of communication API 1.5.0."""
-    return capabilities_pb2.UnityRLCapabilitiesProto(
-        baseRLCapabilities=True,
-        concatenatedPngObservations=True,
-        compressedChannelMapping=True,
-        hybridActions=True,
-        trainingAnalytics=True,
-        variableLengthObservation=True,
-        multiAgentGroups=True,
-    )
-
-
 def check_communication_version(unity_version: str) -> None:
     """Raise UnityVersionError unless Unity's communication API can talk to ours (spec §1.6).
 
@@ -208,7 +195,7 @@ def steps_from_agent_infos(
 ) -> tuple[DecisionSteps, TerminalSteps]:
     """Split n AgentInfoProtos into DecisionSteps (done=false) and TerminalSteps (done=true).
 
-    Relative order is kept. Shapes as in ``trainer.protocol.types``. Three decoders give the same
+    Relative order is kept. Shapes as in ``protos.types``. Three decoders give the same
     fields: plain Python for a few deciding agents; for many, their serialized bytes at once
     (``records``, needs ``agent_info_list``, the ListAgentInfoProto holding ``agent_infos``);
     agent by agent for everything else, which also words the errors.
@@ -513,11 +500,6 @@ def _encode_few_agent_actions(continuous: np.ndarray, discrete: np.ndarray) -> b
     return b"".join(records)
 
 
-# UnityMessageProto.header = {status: 200}, as a serialized field (both ends write it directly)
-_HEADER_OK = header_pb2.HeaderProto(status=200).SerializeToString()
-HEADER_OK_FIELD = wire.len_prefix(1, len(_HEADER_OK)) + _HEADER_OK
-
-
 def step_message_bytes(actions: Mapping[str, ActionTuple], side_channel: bytes) -> bytes | None:
     """The serialized UnityMessageProto answering a call with STEP and status 200, written
     directly: what ``fill_rl_input`` + ``SerializeToString`` give (the same bytes for one
@@ -542,7 +524,7 @@ def step_message_bytes(actions: Mapping[str, ActionTuple], side_channel: bytes) 
         entries += [wire.len_prefix(5, len(side_channel)), bytes(side_channel)]
     rl_input = b"".join(entries)
     unity_input = wire.len_prefix(1, len(rl_input)) + rl_input
-    return HEADER_OK_FIELD + wire.len_prefix(3, len(unity_input)) + unity_input
+    return wire.HEADER_OK_FIELD + wire.len_prefix(3, len(unity_input)) + unity_input
 
 
 def _fill_agent_actions(value, continuous: np.ndarray, discrete: np.ndarray) -> None:

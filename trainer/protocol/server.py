@@ -31,16 +31,18 @@ from typing import TYPE_CHECKING, Callable, Mapping
 from google.protobuf.message import DecodeError
 
 from protos.communicator_objects import unity_message_pb2
+from protos.errors import ProtocolError
 from trainer.errors import (
     PortInUseError,
-    ProtocolError,
     SimulatorExitedError,
     UnityCommunicatorStoppedError,
     UnityTimeOutError,
 )
-from trainer.protocol import codec, records
+from protos import records
+from trainer.protocol import codec
 from protos.http2 import GRPC_INTERNAL, Http2Transport
-from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
+from protos.types import ActionTuple, BehaviorSpec, StepResult
+from protos.versions import COMMUNICATION_VERSION, PACKAGE_VERSION, all_true_capabilities
 from trainer.stop import STOP
 
 if TYPE_CHECKING:  # grpcio is imported by its transport only (MLAGENTS_LIKE_TRANSPORT=grpcio)
@@ -323,7 +325,7 @@ class UnityEndpoint:
             logger.warning(
                 "The Unity environment%s (package %s) does not report the base RL capabilities; "
                 "upgrade its ML-Agents package to one compatible with Python package %s.",
-                self._for(), init.package_version, codec.PACKAGE_VERSION,
+                self._for(), init.package_version, PACKAGE_VERSION,
             )
         logger.debug(
             "Connected to Unity environment with package version %s and communication version %s",
@@ -332,9 +334,9 @@ class UnityEndpoint:
         response = _status_message(STATUS_OK)
         init_input = response.unity_input.rl_initialization_input
         init_input.seed = seed
-        init_input.communication_version = codec.COMMUNICATION_VERSION
-        init_input.package_version = codec.PACKAGE_VERSION
-        init_input.capabilities.CopyFrom(codec.all_true_capabilities())
+        init_input.communication_version = COMMUNICATION_VERSION
+        init_input.package_version = PACKAGE_VERSION
+        init_input.capabilities.CopyFrom(all_true_capabilities())
         init_input.num_areas = num_areas
         self._answer(response)
         self._wait_for_call()  # M2: no output; answered by the first reset

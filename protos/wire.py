@@ -124,6 +124,12 @@ def rows(parts: Sequence[Part], n: int) -> np.ndarray:
     return out
 
 
+# UnityMessageProto.header (1) = HeaderProto{status (1) = 200}: every answer and every step
+# message starts with these bytes; both ends write them directly
+_HEADER_OK = tag(1, VARINT) + varint(200)
+HEADER_OK_FIELD = len_prefix(1, len(_HEADER_OK)) + _HEADER_OK
+
+
 def repeated_rows(field_number: int, parts: Sequence[Part], n: int) -> bytes:
     """A serialized repeated message field of n elements whose bytes are ``rows(parts, n)``:
     each element's header (tag, length) is one more constant part of its row."""
