@@ -148,8 +148,7 @@ def _encode_few(observation_specs, observations, rewards, ids, done, max_step, m
             parts += [mask_prefix, masks[row].tobytes()]
         for (head, tail), obs in zip(frames, flat_obs):
             parts += [head, obs[row].tobytes(), tail]
-        content = b"".join(parts)
-        records.append(wire.len_prefix(1, len(content)) + content)
+        records.append(wire.field(1, b"".join(parts)))
     return EncodedInfos(b"".join(records), len(ids))
 
 

@@ -266,20 +266,14 @@ def step_message_bytes(lists: list[tuple[str, bytes]], side_channel: bytes, brai
     holding ``brain_parameters`` when there are any. The same bytes protobuf writes for the
     message built field by field (tests/stub/test_stub_wire.py); the agent infos are copied,
     never parsed."""
-    parts = []
-    for key, data in lists:
-        name = key.encode()
-        entry = wire.len_prefix(1, len(name)) + name + wire.len_prefix(2, len(data)) + data
-        parts += [wire.len_prefix(2, len(entry)), entry]
+    parts = [wire.map_entry(2, key, data) for key, data in lists]
     if side_channel:
-        parts += [wire.len_prefix(3, len(side_channel)), side_channel]
-    rl_output = b"".join(parts)
-    output = wire.len_prefix(1, len(rl_output)) + rl_output
+        parts.append(wire.field(3, side_channel))
+    output = wire.field(1, b"".join(parts))
     if brain_parameters:
-        init = unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
-            brain_parameters=brain_parameters).SerializeToString()
-        output += wire.len_prefix(2, len(init)) + init
-    return wire.HEADER_OK_FIELD + wire.len_prefix(2, len(output)) + output
+        output += wire.field(2, unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
+            brain_parameters=brain_parameters).SerializeToString())
+    return wire.HEADER_OK_FIELD + wire.field(2, output)
 
 
 # Side channels -------------------------------------------------------------------------------

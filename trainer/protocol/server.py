@@ -28,8 +28,6 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Callable, Mapping
 
-from google.protobuf.message import DecodeError
-
 from protos.communicator_objects import unity_message_pb2
 from protos.errors import ProtocolError
 from trainer.errors import (
@@ -38,11 +36,10 @@ from trainer.errors import (
     UnityCommunicatorStoppedError,
     UnityTimeOutError,
 )
-from protos import records
-from trainer.protocol import codec
 from protos.http2 import GRPC_INTERNAL, Http2Transport
 from protos.types import ActionTuple, BehaviorSpec, StepResult
 from protos.versions import COMMUNICATION_VERSION, PACKAGE_VERSION, all_true_capabilities
+from trainer.protocol import codec
 from trainer.stop import STOP
 
 if TYPE_CHECKING:  # grpcio is imported by its transport only (MLAGENTS_LIKE_TRANSPORT=grpcio)
@@ -242,7 +239,6 @@ class UnityEndpoint:
             raise ValueError(f"unknown transport {self.transport_name!r}")
         self._transport = None
         self._pending = None  # the simulator call we owe an answer
-        self._large_lists = True  # whether to look for agent info lists to decode from bytes
         self._deciding: dict[str, int] = {}  # agents per behavior that wait for an action
         self._messages_received = 0
         self._closed = False
@@ -313,7 +309,7 @@ class UnityEndpoint:
         Returns M1's UnityRLInitializationOutputProto. Raises UnityVersionError for an
         incompatible communication API (the M1 call stays pending; ``close()`` answers it).
         """
-        first = self._wait_for_call().request
+        first = self._wait_for_call().message
         if not first.unity_output.HasField("rl_initialization_output"):
             raise ProtocolError(
                 f"The first message from the simulator{self._for()} carried no initialization "
@@ -346,9 +342,7 @@ class UnityEndpoint:
     # ------------------------------------------------------------------ exchanges
     def send_reset(self, side_channel: bytes = b"") -> None:
         """Answer the pending simulator call with RESET (no actions). Does not block."""
-        response = _status_message(STATUS_OK)
-        codec.fill_rl_input(response.unity_input.rl_input, {}, side_channel, codec.RESET)
-        self._answer(response)
+        self._answer_bytes(codec.encode_answer({}, side_channel, codec.RESET))
 
     def send_step(self, actions: Mapping[str, ActionTuple], side_channel: bytes = b"") -> None:
         """Answer the pending call with STEP. Does not block.
@@ -366,19 +360,11 @@ class UnityEndpoint:
                 raise ValueError(
                     f"{name}: {rows.pop()} action rows for {self._deciding.get(name, 0)} deciding agents"
                 )
-        payload = codec.step_message_bytes(full_actions, side_channel)
-        if payload is None:  # an action the direct encoder leaves to the protobuf objects
-            response = _status_message(STATUS_OK)
-            codec.fill_rl_input(response.unity_input.rl_input, full_actions, side_channel, codec.STEP)
-            payload = response.SerializeToString()
-        self._answer_bytes(payload)
+        self._answer_bytes(codec.encode_answer(full_actions, side_channel))
 
     def receive(self) -> StepResult:
         """Wait for the simulator's next message and decode it (leaves that call pending)."""
-        call = self._wait_for_call()
-        result = codec.decode_rl_output(call.request.unity_output, self.behavior_specs, call.raw_lists)
-        self._large_lists = any(len(decision) + len(terminal) >= records.MIN_ROWS
-                                for decision, terminal in result.steps.values())
+        result = self._wait_for_call().result
         self.behavior_specs.update(result.specs)
         self._deciding = {name: len(steps[0]) for name, steps in result.steps.items()}
         return result
@@ -401,8 +387,9 @@ class UnityEndpoint:
         call, self._pending = self._pending, None
         call.answer(payload)
 
-    def _wait_for_call(self) -> "_Call":
-        """Block until the simulator's next call arrives; it becomes the pending call."""
+    def _wait_for_call(self) -> codec.DecodedMessage:
+        """Block until the simulator's next call arrives; it becomes the pending call, its
+        message is decoded (once, here, by the codec) and returned."""
         if self._transport is None or self._closed:
             raise RuntimeError("UnityEndpoint is not started or already closed")
         if self._pending is not None:
@@ -426,29 +413,26 @@ class UnityEndpoint:
             if remaining <= 0:
                 raise self._timeout_error(time.monotonic() - started)
             wait = min(poll_interval, remaining)
-        # large agent info lists are kept as bytes and decoded once, by the codec; looked for
-        # while the last message had one (agent counts rarely change: small scenes skip the walk)
-        split = records.split_agent_lists(call.payload, records.MIN_ROWS) if self._large_lists else None
-        payload, raw_lists = split if split is not None else (call.payload, None)
+        self._pending = call  # pending before decoding: close() answers it if the data is bad
+        self._messages_received += 1
         try:
-            request = unity_message_pb2.UnityMessageProto.FromString(payload)
-        except DecodeError as error:
+            decoded = codec.decode_message(call.payload, self.behavior_specs)
+        except codec.NotAMessageError as error:
+            self._pending = None
             call.fail(GRPC_INTERNAL, "the message is not a valid UnityMessageProto")
             raise ProtocolError(
-                f"The simulator{self._for()} on port {self.port} sent a message that is not a valid "
-                f"UnityMessageProto ({error}); is it an ML-Agents environment speaking "
-                "communication API 1.x? Rebuild it with the ML-Agents package of Release 22."
+                f"The simulator{self._for()} on port {self.port} sent a message that is "
+                f"{error}; is it an ML-Agents environment speaking communication API 1.x? "
+                "Rebuild it with the ML-Agents package of Release 22."
             ) from None
-        call = _Call(call, request, raw_lists)
-        self._pending = call
-        self._messages_received += 1
-        if request.header.status != STATUS_OK:
+        status = decoded.message.header.status
+        if status != STATUS_OK:
             self._answer(_status_message(STATUS_CLOSING))
             raise UnityCommunicatorStoppedError(
                 f"The simulator{self._for()} on port {self.port} closed the connection "
-                f"(status {request.header.status})."
+                f"(status {status})."
             )
-        return call
+        return decoded
 
     def _raise_if_simulator_died(self) -> None:
         if self.is_alive is not None and not self.is_alive():
@@ -469,17 +453,3 @@ class UnityEndpoint:
     def _for(self) -> str:
         describe = self.describe() if callable(self.describe) else self.describe
         return f" ({describe})" if describe else ""
-
-
-class _Call:
-    """A transport's call with its request parsed once, on the trainer's thread."""
-
-    __slots__ = ("raw", "request", "raw_lists")
-
-    def __init__(self, raw, request: unity_message_pb2.UnityMessageProto, raw_lists=None) -> None:
-        self.raw = raw
-        self.request = request
-        self.raw_lists = raw_lists  # agent info lists left as bytes (records.split_agent_lists)
-
-    def answer(self, response: bytes) -> None:
-        self.raw.answer(response)
