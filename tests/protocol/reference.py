@@ -18,14 +18,14 @@ from protos.communicator_objects import command_pb2, observation_pb2, unity_mess
 def answer(actions: Mapping[str, tuple], side_channel: bytes = b"", command: int = command_pb2.STEP) -> bytes:
     """The serialized UnityMessageProto (status 200) protobuf writes for ``actions``
     ({behavior: (continuous [n, c], discrete [n, b])}); behaviors with no rows are left out,
-    RESET carries no actions."""
+    RESET carries no actions. Map entries in key order (deterministic serialization)."""
     message = unity_message_pb2.UnityMessageProto()
     message.header.status = 200
     rl_input = message.unity_input.rl_input
     rl_input.command = command
     rl_input.side_channel = bytes(side_channel)
     if command == command_pb2.RESET:
-        return message.SerializeToString()
+        return message.SerializeToString(deterministic=True)
     for name, (continuous, discrete) in actions.items():
         continuous = np.asarray(continuous, dtype=np.float32).tolist()
         discrete = np.asarray(discrete, dtype=np.int64).tolist()
@@ -37,7 +37,7 @@ def answer(actions: Mapping[str, tuple], side_channel: bytes = b"", command: int
             agent.vector_actions_deprecated.extend(cont_row + [float(d) for d in disc_row])
             agent.continuous_actions.extend(cont_row)
             agent.discrete_actions.extend(disc_row)
-    return message.SerializeToString()
+    return message.SerializeToString(deterministic=True)
 
 
 def observation_value(obs: observation_pb2.ObservationProto) -> np.ndarray:
