@@ -35,10 +35,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from trainer.protocol.server import UnityEndpoint  # noqa: E402
-from unity_stub_env.launcher import spin_wait_args, write_player_launcher  # noqa: E402
-from unity_stub_env import make_task  # noqa: E402
 from trainer.envs.cpus import spin_budget  # noqa: E402
+from trainer.protocol.server import UnityEndpoint  # noqa: E402
+from unity_stub_env import make_task  # noqa: E402
+from unity_stub_env.launcher import spin_wait_args, write_player_launcher  # noqa: E402
 
 INTEROP_PYTHON = REPO / ".venv-interop" / "bin" / "python"
 PEER = Path(__file__).resolve().parent / "peers" / "mlagents_envs_rollout.py"

@@ -25,8 +25,8 @@ from typing import Callable
 
 import numpy as np
 
-from trainer.ppo.buffer import Trajectory
 from protos.types import BehaviorSpec, DecisionSteps, TerminalSteps
+from trainer.ppo.buffer import Trajectory
 
 
 @dataclass

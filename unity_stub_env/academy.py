@@ -24,8 +24,8 @@ from typing import Sequence
 
 import numpy as np
 
-from protos.communicator_objects import agent_action_pb2, agent_info_pb2
 from protos import records
+from protos.communicator_objects import agent_action_pb2, agent_info_pb2
 from unity_stub_env.agents import EncodedInfos, EpisodeIdCounter, encode_agent_infos
 from unity_stub_env.tasks.base import Stat, Task
 

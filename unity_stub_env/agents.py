@@ -10,12 +10,12 @@ from typing import Sequence
 
 import numpy as np
 
+from protos import wire
 from protos.communicator_objects import (
     agent_info_pb2,
     brain_parameters_pb2,
     space_type_pb2,
 )
-from protos import wire
 from protos.types import ActionSpec, ObservationSpec
 
 

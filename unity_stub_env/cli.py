@@ -19,8 +19,8 @@ import sys
 
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter, build_brain_parameters
-from unity_stub_env.launcher import spin_wait_args, write_player_launcher
 from unity_stub_env.communicator import RpcCommunicator, SessionEnd, SideChannelState, encode_stats
+from unity_stub_env.launcher import spin_wait_args, write_player_launcher
 from unity_stub_env.tasks import TASKS, EnvironmentParameters, make_task
 
 logger = logging.getLogger("unity_stub_env")

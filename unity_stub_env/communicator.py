@@ -18,6 +18,8 @@ import uuid
 
 from google.protobuf.message import DecodeError
 
+from protos import side_channels as sc
+from protos import wire
 from protos.communicator_objects import (
     header_pb2,
     unity_input_pb2,
@@ -25,11 +27,8 @@ from protos.communicator_objects import (
     unity_output_pb2,
     unity_rl_initialization_output_pb2,
 )
-from protos import side_channels as sc
-from protos import wire
-from protos.versions import COMMUNICATION_VERSION as UNITY_COMMUNICATION_VERSION
-from protos.versions import UNITY_PACKAGE_VERSION, all_true_capabilities
 from protos.http2 import CallError, Http2Channel
+from protos.versions import COMMUNICATION_VERSION, UNITY_PACKAGE_VERSION, all_true_capabilities
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
 logger = logging.getLogger("unity_stub_env")
@@ -168,22 +167,22 @@ class RpcCommunicator:
     def initialize(self):
         """Send M1 and M2. Returns (init input from M1's answer, rl_input of M2's answer)."""
         academy = unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
-            name=ACADEMY_NAME, communication_version=UNITY_COMMUNICATION_VERSION,
+            name=ACADEMY_NAME, communication_version=COMMUNICATION_VERSION,
             package_version=UNITY_PACKAGE_VERSION, capabilities=all_true_capabilities(),  # Unity 3.0 reports all 7
         )
         first = self._exchange_raw(
             _wrap(unity_output_pb2.UnityOutputProto(rl_initialization_output=academy)).SerializeToString())
         init_input = first.unity_input.rl_initialization_input
         trainer_version = init_input.communication_version
-        if not communication_versions_compatible(UNITY_COMMUNICATION_VERSION, trainer_version):
+        if not communication_versions_compatible(COMMUNICATION_VERSION, trainer_version):
             self.close(send_closing=True)
             raise SessionEnd(
                 f"The trainer at {self.address} speaks communication API {trainer_version!r}, which is "
-                f"incompatible with this simulator's {UNITY_COMMUNICATION_VERSION}. Use a trainer for "
+                f"incompatible with this simulator's {COMMUNICATION_VERSION}. Use a trainer for "
                 "ML-Agents Release 22 (communication API 1.x).", 1)
-        if trainer_version.split(".")[:2] != UNITY_COMMUNICATION_VERSION.split(".")[:2]:
+        if trainer_version.split(".")[:2] != COMMUNICATION_VERSION.split(".")[:2]:
             logger.warning("The trainer's communication API %s differs from %s at the minor level; "
-                           "some features may not work.", trainer_version, UNITY_COMMUNICATION_VERSION)
+                           "some features may not work.", trainer_version, COMMUNICATION_VERSION)
         logger.info("Connected to trainer at %s (package version %s, communication version %s)",
                     self.address, init_input.package_version, trainer_version)
         second = self._exchange_raw(_wrap(None).SerializeToString())

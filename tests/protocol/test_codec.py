@@ -15,13 +15,7 @@ from protos.communicator_objects import (
     unity_message_pb2,
     unity_output_pb2,
 )
-from tests.protocol import reference
-from tests.protocol.conftest import agent_info, brain_params, png_bytes
 from protos.errors import ProtocolError
-from trainer.errors import UnityVersionError
-from protos.versions import all_true_capabilities
-from trainer.protocol import codec
-from trainer.protocol.png import split_concatenated_pngs
 from protos.types import (
     ActionSpec,
     ActionTuple,
@@ -30,6 +24,12 @@ from protos.types import (
     ObservationSpec,
     ObservationType,
 )
+from protos.versions import all_true_capabilities
+from tests.protocol import reference
+from tests.protocol.conftest import agent_info, brain_params, png_bytes
+from trainer.errors import UnityVersionError
+from trainer.protocol import codec
+from trainer.protocol.png import split_concatenated_pngs
 
 P = DimensionProperty
 

@@ -17,8 +17,6 @@ import grpc
 import numpy as np
 import pytest
 
-from trainer.errors import UnityCommunicatorStoppedError
-from trainer.protocol.server import UnityEndpoint
 from protos.side_channels import (
     ENGINE_CONFIG_CHANNEL_ID,
     SideChannelRouter,
@@ -31,6 +29,8 @@ from protos.types import (
     ObservationType,
     StatsAggregationMethod,
 )
+from trainer.errors import UnityCommunicatorStoppedError
+from trainer.protocol.server import UnityEndpoint
 
 GOLDEN = Path(__file__).parent / "golden"
 EXCHANGE_PATH = "/communicator_objects.UnityToExternalProto/Exchange"

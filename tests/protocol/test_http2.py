@@ -9,10 +9,10 @@ import threading
 import grpc
 import pytest
 
-from protos.communicator_objects import unity_message_pb2
-from tests.protocol.conftest import free_port, m1, m2
-from protos.errors import ProtocolError
 from protos import http2
+from protos.communicator_objects import unity_message_pb2
+from protos.errors import ProtocolError
+from tests.protocol.conftest import free_port, m1, m2
 from trainer.protocol.server import EXCHANGE_PATH, UnityEndpoint
 
 pytestmark = pytest.mark.timeout(60)

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-import unity_stub_env
 from protos import wire
 from protos.communicator_objects import header_pb2
+import unity_stub_env
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from protos import records, wire
 from protos.communicator_objects import agent_info_pb2, observation_pb2
+from protos.errors import ProtocolError
+from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from tests.protocol.conftest import agent_info, brain_params
 from tests.protocol.test_codec import output_with
-from protos.errors import ProtocolError
-from protos import records, wire
 from trainer.protocol import codec
-from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 
 
 @pytest.fixture(autouse=True)

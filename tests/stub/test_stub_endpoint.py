@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from protos import side_channels as sc
-from trainer.protocol.server import UnityEndpoint
 from protos.types import ActionTuple
+from trainer.protocol.server import UnityEndpoint
 
 
 @pytest.fixture

@@ -7,13 +7,13 @@ import time
 
 import pytest
 
-from trainer.errors import ConfigError, EnvironmentNotFoundError
 from trainer.envs.launcher import (
     RestartPolicy,
     SimulatorProcess,
     build_launch_command,
     resolve_env_path,
 )
+from trainer.errors import ConfigError, EnvironmentNotFoundError
 
 
 def _make_file(path, executable=True):

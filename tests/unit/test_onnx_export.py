@@ -7,9 +7,6 @@ import onnxruntime as ort
 import pytest
 import torch
 
-from trainer.artifacts.onnx_export import export_policy
-from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.policy import Policy
 from protos.types import (
     ActionSpec,
     BehaviorSpec,
@@ -17,6 +14,9 @@ from protos.types import (
     ObservationSpec,
     ObservationType,
 )
+from trainer.artifacts.onnx_export import export_policy
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.policy import Policy
 
 HYPER = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
 CONTINUOUS_OUTPUTS = ["continuous_actions", "continuous_action_output_shape", "deterministic_continuous_actions"]

@@ -7,8 +7,6 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.policy import Policy
 from protos.types import (
     ActionSpec,
     BehaviorSpec,
@@ -16,6 +14,8 @@ from protos.types import (
     ObservationSpec,
     ObservationType,
 )
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.policy import Policy
 
 HYPER = PPOHyperparams(hidden_units=16, num_layers=2)
 

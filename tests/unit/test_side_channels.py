@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from google.protobuf import any_pb2
 
+from protos import side_channels as sc
 from protos.communicator_objects import training_analytics_pb2
 from protos.errors import ProtocolError
-from protos import side_channels as sc
 from protos.types import StatsAggregationMethod
 
 # --- the four observed wire examples of spec §4.2, byte for byte --------------------------------

@@ -16,11 +16,11 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+from protos.types import ActionTuple, BehaviorSpec, StepResult
+from trainer.envs.cpus import spin_budget
 from trainer.envs.launcher import RestartPolicy, SimulatorProcess, build_launch_command, resolve_env_path
 from trainer.errors import SimulatorExitedError, UnityTimeOutError, UserError
-from trainer.envs.cpus import spin_budget
 from trainer.protocol.server import UnityEndpoint
-from protos.types import ActionTuple, BehaviorSpec, StepResult
 
 logger = logging.getLogger("mlagents_like")
 

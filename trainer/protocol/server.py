@@ -2,7 +2,8 @@
 
 The simulator (Unity or unity-stub-env) is the gRPC client: every message it sends is the request
 of an ``Exchange`` call, and the trainer's next message is that call's response. Two transports
-carry the calls, both handing the trainer raw request bytes that it parses once, on its thread:
+carry the calls, both handing the trainer raw request bytes that ``codec.decode_message`` decodes
+once, on its thread:
 
 * ``http2`` (default): ``protos.http2``, a single-threaded HTTP/2 server; the
   trainer's thread reads requests off the socket and writes answers itself.
@@ -30,15 +31,15 @@ from typing import TYPE_CHECKING, Callable, Mapping
 
 from protos.communicator_objects import unity_message_pb2
 from protos.errors import ProtocolError
+from protos.http2 import GRPC_INTERNAL, Http2Transport
+from protos.types import ActionTuple, BehaviorSpec, StepResult
+from protos.versions import COMMUNICATION_VERSION, PACKAGE_VERSION, all_true_capabilities
 from trainer.errors import (
     PortInUseError,
     SimulatorExitedError,
     UnityCommunicatorStoppedError,
     UnityTimeOutError,
 )
-from protos.http2 import GRPC_INTERNAL, Http2Transport
-from protos.types import ActionTuple, BehaviorSpec, StepResult
-from protos.versions import COMMUNICATION_VERSION, PACKAGE_VERSION, all_true_capabilities
 from trainer.protocol import codec
 from trainer.stop import STOP
 
