@@ -13,10 +13,11 @@ Two decode paths, no more (docs/protocol.md):
   message bytes before parsing (``records.split_agent_lists``) and read as one byte matrix
   (``records.decode``); whatever that reader does not handle falls back to the protobuf path.
 
-Measured per call on the stub's messages (min of 300 x 20, 2-vCPU VM, 2026-11-25): the records
-path decodes 64 basic agents in 89 us against 166 us agent by agent, 96 ball3d agents in 87
-against 158 us; below ~64 agents it loses (1 basic agent: 54 against 22 us; 12 ball3d agents:
-80 against 44 us), hence the threshold.
+Measured per call (min of 300 x 20) on 60 consecutive stub messages under random actions, so
+with finished agents among them (2-vCPU VM, 2026-11-25): the records path decodes 64 basic agents
+in 146 us against 180 us through protobuf, 96 ball3d agents in 112 against 152 us; with fewer
+agents it loses (1 basic agent: 59 against 26 us; 12 ball3d agents: 92 against 37 us), hence
+``records.MIN_ROWS`` = 64.
 """
 from __future__ import annotations
 
