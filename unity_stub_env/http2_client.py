@@ -16,13 +16,13 @@ import socket
 import struct
 from urllib.parse import unquote
 
-from trainer.protocol.http2 import (
+from protos.http2 import (
     ACK, CANCEL, CONTINUATION, DATA, DEFAULT_WINDOW, END_HEADERS, END_STREAM, FRAME_SIZE_ERROR, GOAWAY,
     GRPC_OK, HEADERS, MAX_WINDOW, NO_ERROR, OUR_MAX_FRAME, PING, PREFACE, PRIORITY_FLAG, RST_STREAM,
     SETTINGS, SETTINGS_INITIAL_WINDOW_SIZE, SETTINGS_MAX_FRAME_SIZE, WINDOW_UPDATE, CachingDecoder,
     Http2Error, _NAMES, _ReadBuffer, _strip_padding, frame, hpack_int, hpack_literal, take_frames,
 )
-from trainer.protocol.pacing import PacedWait, wait_paced
+from protos.pacing import PacedWait, wait_paced
 
 _MIN_LENGTH = {RST_STREAM: 4, WINDOW_UPDATE: 4, GOAWAY: 8, PING: 8}  # what the client reads of them
 

@@ -19,6 +19,12 @@ def player_name(tasks: list[str]) -> str:
     return "Stub" + "".join("".join(ch for ch in task.title() if ch.isalnum()) for task in tasks)
 
 
+def spin_wait_args(spin_s: float) -> list[str]:
+    """The stub's command-line arguments for a polling budget of ``spin_s`` s (none for 0): how
+    a launcher (ours, or the trainer's for ``--env stub:TASK``) passes pacing on to the stub."""
+    return ["--spin-wait-ms", f"{spin_s * 1e3:g}"] if spin_s > 0 else []
+
+
 def write_player_launcher(folder: str | Path, tasks: list[str], python: str | None = None,
                           extra_args: list[str] | None = None) -> Path:
     """Write ``folder/<player_name>.x86_64`` (executable) and return its path; ``extra_args``

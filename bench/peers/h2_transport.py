@@ -23,7 +23,7 @@ import h2.exceptions
 import h2.settings
 
 from trainer.protocol import http2
-from trainer.protocol.http2 import (
+from protos.http2 import (
     GRPC_INTERNAL,
     GRPC_RESOURCE_EXHAUSTED,
     GRPC_UNIMPLEMENTED,

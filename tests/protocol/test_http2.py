@@ -9,10 +9,10 @@ import threading
 import grpc
 import pytest
 
+from protos import http2
 from protos.communicator_objects import unity_message_pb2
+from protos.errors import ProtocolError
 from tests.protocol.conftest import free_port, m1, m2
-from trainer.errors import ProtocolError
-from trainer.protocol import http2
 from trainer.protocol.server import EXCHANGE_PATH, UnityEndpoint
 
 pytestmark = pytest.mark.timeout(60)
@@ -223,25 +223,6 @@ def test_caching_decoder_reuses_only_blocks_that_leave_the_table_unchanged():
     assert decoder._cache == {}  # the table changed: every cached result is void
     # index 62 is now the newest entry: a stale cache would still answer grpc-status
     assert decoder.decode(again) == [(b"x-other", b"1")]
-
-
-def test_agent_actions_bytes_equal_the_one_message_at_a_time_encoding():
-    import numpy as np
-
-    from protos.communicator_objects import unity_rl_input_pb2
-    from trainer.protocol import codec
-
-    rng = np.random.default_rng(3)
-    for c, b in [(2, 0), (0, 3), (3, 2), (0, 0)]:
-        continuous = rng.normal(size=(5, c)).astype(np.float32)
-        discrete = rng.integers(0, 127, size=(5, b)).astype(np.int32)
-        fast = unity_rl_input_pb2.UnityRLInputProto.ListAgentActionProto.FromString(
-            codec.encode_agent_actions(continuous, discrete))
-        slow = unity_rl_input_pb2.UnityRLInputProto.ListAgentActionProto()
-        codec._fill_agent_actions(slow.value, continuous, discrete)
-        assert fast.SerializeToString() == slow.SerializeToString() and len(fast.value) == 5
-    # a discrete action that needs a 2-byte varint takes the message-by-message path
-    assert codec.encode_agent_actions(np.zeros((1, 0), np.float32), np.array([[200]], np.int32)) is None
 
 
 def test_endless_header_blocks_close_the_connection_instead_of_growing():

@@ -7,9 +7,9 @@ from typing import Sequence
 import numpy as np
 import pytest
 
+from protos import wire
 from protos.communicator_objects import agent_info_pb2, observation_pb2, unity_rl_output_pb2
-from trainer.protocol import wire
-from trainer.protocol.types import ObservationSpec
+from protos.types import ObservationSpec
 from unity_stub_env.agents import encode_agent_infos
 from unity_stub_env.tasks import make_task
 

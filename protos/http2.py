@@ -41,7 +41,7 @@ from urllib.parse import quote
 
 import hpack
 
-from trainer.protocol.pacing import PacedWait, wait_paced
+from protos.pacing import PacedWait, wait_paced
 
 logger = logging.getLogger(__name__)
 
