@@ -4,7 +4,8 @@ POLICY is a trained ``.onnx`` file (the model a run exports; run with onnxruntim
 ONNX contract's ``deterministic_continuous_actions``, i.e. the mean action), ``zero`` (every action
 0) or ``random`` (uniform in [-1, 1], seeded). ``--evaluate`` may be repeated; the zero and random
 baselines are always evaluated beside it. Printed per policy, for the scripted and the random
-throws: hit rate, balance-loss rate, pass rate, mean effort (the effort terms' magnitudes summed
+throws: hit rate, the hit rate of the throws aimed above the pelvis (with their count: the ones
+fixed feet leave dodgeable), balance-loss rate, pass rate, mean effort (the effort terms' magnitudes summed
 over an episode, averaged over the episodes) and mean episode return. Tasks with an evaluation are listed in ``EVALUATIONS``.
 """
 from __future__ import annotations
@@ -96,12 +97,13 @@ def run(task_name: str, policies: list[str], seed: int, episodes: int, json_path
 
 def format_table(results: dict) -> str:
     """Markdown: one row per policy and throw set, then each policy's scripted throws."""
-    lines = ["| policy | throws | episodes | hit rate | balance-loss rate | pass rate | mean effort | mean return |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| policy | throws | episodes | hit rate | upper-body hit rate | balance-loss rate | pass rate | "
+             "mean effort | mean return |", "|---|---|---|---|---|---|---|---|---|"]
     for name, result in results.items():
         for part in ("scripted", "random"):
             s = result[part]
-            lines.append(f"| {name} | {part} | {s['episodes']} | {s['hit_rate']:.3f} | {s['balance_loss_rate']:.3f} | "
+            lines.append(f"| {name} | {part} | {s['episodes']} | {s['hit_rate']:.3f} | "
+                         f"{s['upper_body_hit_rate']:.3f} ({s['upper_body_throws']}) | {s['balance_loss_rate']:.3f} | "
                          f"{s['pass_rate']:.3f} | {s['mean_effort']:.3f} | {s['mean_return']:.3f} |")
     for name, result in results.items():
         outcomes = ", ".join(f"{t['throw']} {t['side']}/{t['mark']}: {t['outcome']}" for t in result["scripted_throws"])

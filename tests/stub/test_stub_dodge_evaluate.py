@@ -44,6 +44,8 @@ def test_evaluate_prints_and_writes_the_policy_and_both_baselines(tmp_path, caps
     # a character that does not move is hit by every throw, each aimed at it; the head throws
     # (2 front, 8 right, 13 left) hit the head
     assert zero["scripted"]["hit_rate"] == 1.0 and zero["random"]["hit_rate"] == 1.0
+    assert zero["scripted"]["upper_body_throws"] == 13  # all but the three pelvis and the thigh marks
+    assert 0 < zero["random"]["upper_body_throws"] < EPISODES
     assert [t["outcome"] for t in zero["scripted_throws"] if t["mark"] == "head"] == ["hit head"] * 3
     assert [(t["side"], t["mark"]) for t in zero["scripted_throws"]] == list(SCRIPTED_THROWS)
     # standing still costs only the balance term, ~0.0106 per step
@@ -51,7 +53,8 @@ def test_evaluate_prints_and_writes_the_policy_and_both_baselines(tmp_path, caps
     assert results["random"]["random"]["mean_effort"] > 2 * zero["random"]["mean_effort"]
     # the model acts with its deterministic output: the same outcomes as the torch policy's mean action
     mean_action = lambda obs: policy.act([obs], None, deterministic=True).env_actions.continuous  # noqa: E731
-    expected = summarize(run_throws(random_throws(EPISODES, 5), mean_action, seed=5))
+    throws = random_throws(EPISODES, 5)
+    expected = summarize(run_throws(throws, mean_action, seed=5), throws)
     assert results[str(model)]["random"] == pytest.approx(expected, rel=1e-4)
     assert results[str(model)]["random"]["mean_effort"] != pytest.approx(zero["random"]["mean_effort"], rel=0.05)
 

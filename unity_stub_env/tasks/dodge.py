@@ -62,7 +62,22 @@ probability proportional to its surface area, then a uniform point inside it); h
 Euler (``launch``), so an unmoving character is hit unless the floor deflects the sphere first.
 
 Masses: every geom has the density of water; MuJoCo integrates body masses from the geom volumes
-once at compile time (79.0 kg in all); the CoM is MuJoCo's ``subtree_com`` of the pelvis.
+once at compile time (79.0 kg in all; head 6.7 %, torso and pelvis 51.4 %, arms 9.6 %, thighs
+18.8 %, shanks 8.9 %, feet 4.6 %, close to Winter's tables); the CoM is MuJoCo's ``subtree_com``
+of the pelvis. Support polygon: the convex hull of the soles' corners, x in [-0.15, 0.15] m,
+y in [-0.07, 0.19] m (centroid (0, 0.06)); the standing CoM is at y = 0.003 m.
+
+Consequences worth knowing (measured on this model):
+  * Within the human limits above the CoM projection never leaves the support polygon (over 4,200
+    random poses it reached y = 0.172 m at most, the toes are at 0.19 m: only the upper body moves
+    and the pelvis never shifts), so the -5 balance rule is a guard that the limits already
+    satisfy; the tests exercise it on a shrunken polygon. The balance effort term still pays for
+    leaning.
+  * Area-weighted targets put 61 % of the random throws at or below the pelvis (targets under
+    1.11 m: legs 39 % of the surface, pelvis 10 %, the lower arms), where fixed feet cannot get out
+    of the way; the evaluation therefore also reports the hit rate of the throws aimed higher.
+  * A limit stops a rotation: pushing further into it leaves the pose unchanged, which is not a
+    move and costs nothing (the thesis charges the torso and neck only on steps they moved).
 """
 from __future__ import annotations
 
@@ -505,6 +520,7 @@ SCRIPTED_THROWS = (
 SCRIPTED_HEIGHT = 1.5  # m, the thrower's hand
 SCRIPTED_SPEED = 7.0  # m/s, horizontal
 EVAL_AREAS_PER_BATCH = 8  # 112 characters in one model
+UPPER_BODY = 1.11  # m: targets above the pelvis' top
 
 
 def scripted_throws() -> Throws:
@@ -550,10 +566,16 @@ def run_throws(throws: Throws, act, seed: int = 0) -> dict[str, np.ndarray]:
     return {key: np.concatenate(values) for key, values in out.items()}
 
 
-def summarize(outcome: dict[str, np.ndarray]) -> dict[str, float]:
-    """Rates over the episodes of ``run_throws``: hit, balance loss, pass; mean effort and return."""
+def summarize(outcome: dict[str, np.ndarray], throws: Throws) -> dict[str, float]:
+    """Rates over the episodes of ``run_throws``: hit, balance loss, pass; mean effort and return;
+    and the hit rate of the throws aimed above the pelvis (UPPER_BODY), the ones fixed feet allow
+    to dodge (a pelvis or leg target can at best be ducked under by a high arc)."""
+    hit = outcome["hit_region"] >= 0
+    upper = throws.target[:, 2] > UPPER_BODY
     return {"episodes": int(len(outcome["steps"])),
-            "hit_rate": float(np.mean(outcome["hit_region"] >= 0)),
+            "hit_rate": float(np.mean(hit)),
+            "upper_body_throws": int(upper.sum()),
+            "upper_body_hit_rate": float(np.mean(hit[upper])) if upper.any() else float("nan"),
             "balance_loss_rate": float(np.mean(outcome["balance_lost"])),
             "pass_rate": float(np.mean(outcome["passed"])),
             "mean_effort": float(np.mean(outcome["effort"])),
@@ -563,11 +585,13 @@ def summarize(outcome: dict[str, np.ndarray]) -> dict[str, float]:
 
 def evaluate(act, seed: int = 0, episodes: int = 500) -> dict:
     """The scripted evaluation: the 17 scripted throws and ``episodes`` seeded random throws."""
-    scripted = run_throws(scripted_throws(), act, seed)
-    randomly = run_throws(random_throws(episodes, seed), act, seed)
+    scripted_set, random_set = scripted_throws(), random_throws(episodes, seed)
+    scripted = run_throws(scripted_set, act, seed)
+    randomly = run_throws(random_set, act, seed)
     per_throw = [{"throw": i + 1, "side": side, "mark": mark,
                   "outcome": ("hit " + REGIONS[scripted["hit_region"][i]] if scripted["hit_region"][i] >= 0
                               else "balance lost" if scripted["balance_lost"][i]
                               else "passed" if scripted["passed"][i] else "interrupted")}
                  for i, (side, mark) in enumerate(SCRIPTED_THROWS)]
-    return {"scripted": summarize(scripted), "random": summarize(randomly), "scripted_throws": per_throw}
+    return {"scripted": summarize(scripted, scripted_set), "random": summarize(randomly, random_set),
+            "scripted_throws": per_throw}
