@@ -10,7 +10,6 @@ import pytest
 from unity_stub_env.cli import main
 from unity_stub_env.tasks import TASKS, make_task
 from unity_stub_env.tasks.dodge import (
-    CROUCH_MAX,
     CROUCH_RATE,
     HIT_PENALTY,
     NECK_RATE,
@@ -66,8 +65,9 @@ def test_mjcf_loads_with_masses_from_volumes_and_the_documented_limits():
         "neck_x": (-50, 60), "neck_y": (-45, 45), "neck_z": (-80, 80),
     }
     # the crouch stops where the first coupled joint reaches its limit: the ankle at 45 degrees
-    assert math.degrees(CROUCH_MAX) == pytest.approx(45.0)
-    assert model.jnt_range[model.joint("root_z").id, 0] <= -0.86 * (1 - math.cos(CROUCH_MAX))
+    crouch_max = _task().crouch_max
+    assert math.degrees(crouch_max) == pytest.approx(45.0)
+    assert model.jnt_range[model.joint("root_z").id, 0] <= -0.86 * (1 - math.cos(crouch_max))
 
 
 def test_spec_and_cli_list_show_17_observations_and_9_actions(capsys):
@@ -86,7 +86,7 @@ def test_crouch_keeps_the_feet_fixed_and_the_observed_quaternions_are_mujocos():
     task = _task()
     model, data = task.model, task.data
     rng = np.random.default_rng(1)
-    task.crouch[:] = np.linspace(0, CROUCH_MAX, N)
+    task.crouch[:] = np.linspace(0, task.crouch_max, N)
     task.euler[:] = rng.uniform(task.rot_low, task.rot_high, (N, 2, 3))
     data.qpos[task.pose_qpos] = task._pose_rows()
     mujoco.mj_forward(model, data)
@@ -107,6 +107,11 @@ def test_crouch_keeps_the_feet_fixed_and_the_observed_quaternions_are_mujocos():
         assert abs(np.dot(obs[i, 1:5], data.xquat[torso[i]])) == pytest.approx(1.0, abs=1e-6)
         assert abs(np.dot(obs[i, 5:9], relative)) == pytest.approx(1.0, abs=1e-6)
     assert np.allclose(obs[:, 0], task.crouch)
+    # the crouch action saturates at the limit: 16 steps of 3 degrees stop at 45
+    task = _task()
+    for _ in range(16):
+        task.step(_act(crouch=1.0), NO_DISCRETE)
+    assert np.allclose(task.observe()[0][:, 0], math.radians(45.0))
 
 
 def test_start_observation_and_zero_action_reward_by_hand():

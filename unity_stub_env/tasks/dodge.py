@@ -108,7 +108,6 @@ DEAD_ZONE = 0.05
 CROUCH_RATE = math.radians(3.0)  # per control step at |a| = 1
 TORSO_RATE = math.radians(4.0)
 NECK_RATE = math.radians(6.0)
-CROUCH_MAX = math.radians(45.0)
 PASS_DISTANCE = 0.8
 FAR_DISTANCE = 12.0
 PASS_REWARD = 5.0
@@ -311,6 +310,9 @@ class DodgeTask(Task):
         # the two 3-DoF joints' limits as [2, 3] (torso, neck)
         self.rot_low = self.joint_low[7:].reshape(2, 3)
         self.rot_high = self.joint_high[7:].reshape(2, 3)
+        # the crouch stops where the first coupled joint meets its limit (hip a, knee -2a, ankle a):
+        # with dodge.xml's ranges the ankle, at 45 degrees
+        self.crouch_max = float(min(self.joint_high[1], -self.joint_low[2] / 2, self.joint_high[3]))
         self._start_pose_geometry()
         # per-agent state
         self.crouch = np.zeros(n)
@@ -384,6 +386,8 @@ class DodgeTask(Task):
         t = horizontal distance / horizontal speed."""
         delta = throws.target - throws.start
         flight = np.linalg.norm(delta[:, :2], axis=1) / throws.speed
+        if not (flight > 0).all():
+            raise ValueError("every throw needs a horizontal distance to its target and a positive speed")
         velocity = delta / flight[:, None]
         velocity[:, 2] += 0.5 * self.gravity * (flight + self.timestep)
         qpos, qvel = self.data.qpos, self.data.qvel
@@ -431,7 +435,7 @@ class DodgeTask(Task):
         """continuous float [n, 9] in [-1, 1] -> one 0.02 s control step of every agent."""
         n = self.num_agents
         action = _dead_zone(np.asarray(continuous, dtype=np.float64).reshape(n, 9).clip(-1.0, 1.0))
-        self.crouch = np.clip(self.crouch + action[:, 0] * CROUCH_RATE, 0.0, CROUCH_MAX)
+        self.crouch = np.clip(self.crouch + action[:, 0] * CROUCH_RATE, 0.0, self.crouch_max)
         axes = action[:, [[1, 2, 3], [5, 6, 7]]]  # [n, 2, 3]: torso, neck
         norm = np.linalg.norm(axes, axis=2)
         angle = np.where(norm > 1e-6, action[:, [4, 8]] * (TORSO_RATE, NECK_RATE), 0.0)
