@@ -30,7 +30,7 @@ def test_fourteen_agents_train_one_behavior_through_grpc(tmp_path, env_no_proxy)
     acc.Reload()
     steps = [e.step for e in acc.Scalars("Environment/Cumulative Reward")]
     assert steps == [1400, 2800]  # 14 agent-steps per decision: 100 and 200 decisions
-    # each episode is one throw: 0.4-1.3 s of flight at 50 decisions/s, ended by a hit or a pass
+    # each episode is one throw: 0.4-1.4 s of flight at 50 decisions/s, ended by a hit or a pass
     lengths = [e.value for e in acc.Scalars("Environment/Episode Length")]
     assert all(20 <= length <= 65 for length in lengths), lengths
     outcome = [a.value + b.value + c.value for a, b, c in zip(acc.Scalars("Dodge/Hit"), acc.Scalars("Dodge/Passed"),

@@ -10,8 +10,8 @@ and spheres, so one ``mj_step`` advances every agent.
 Layout: in an area the 14 characters stand in a row 3 m apart (x), areas are rows 25 m apart (y),
 everyone faces +y. Agent k of an area only collides with its own sphere (collision bit k + 1 on its
 geoms' conaffinity and on its sphere's contype; bit 0 is the floor), so a sphere never touches
-another agent; across areas, no sphere gets farther than 7 m from its own character (start <= 6 m,
-the pass is called 0.8 m past it) and rows are 25 m apart.
+another agent; across areas, no sphere gets farther than 12 m from its own character (the episode
+ends there at the latest; normally 0.8 m past it, see the pass) and rows are 25 m apart.
 
 Actions, 9 continuous in [-1, 1] (|a| <= 0.05 counts as 0 for the crouch and the two angles, so a
 policy can hold still, see the effort terms), in this order:
@@ -52,7 +52,7 @@ one; the capsules overlap, so a sphere can touch two at once): head and neck -5,
 shoulders) -4, pelvis -3, arms -2, legs (thighs, shanks, feet) -2 (Zordan et al.'s ordering:
 head > torso > pelvis > limbs). A hit and a balance loss in the same step both count; the pass
 needs neither. Episodes are interrupted after max_step = 300 control steps (6 s; a throw lasts
-0.4-1.3 s). The pose is back at zero for the next episode.
+0.4-1.4 s). The pose is back at zero for the next episode.
 
 Throws (training): start at a horizontal distance of 4-6 m from the character's axis, from an
 azimuth within +-120 deg of straight ahead (front and both sides, as the thesis' test throws), at
