@@ -3,6 +3,7 @@
     unity-stub-env --task NAME --mlagents-port P [-nographics] [-batchmode] [-logFile F]
                    [--num-areas N] [--seed S] [--decision-period K] [--connect-timeout T]
     unity-stub-env --list
+    unity-stub-env --task dodge --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
@@ -49,6 +50,13 @@ def build_parser() -> argparse.ArgumentParser:
                              "sleeping through it (saves the wake-up on a machine with a CPU to spare; "
                              "mlagents-like-learn passes it when it does; default 0 = always sleep)")
     parser.add_argument("--list", action="store_true", help="list the tasks with their specs and exit")
+    parser.add_argument("--evaluate", action="append", metavar="POLICY", default=None,
+                        help="run --task's scripted evaluation (no trainer) with POLICY: a trained .onnx, "
+                             "'zero' or 'random' (the last two are always shown beside it); repeatable")
+    parser.add_argument("--episodes", type=int, default=500,
+                        help="--evaluate: random throws after the scripted ones (default 500)")
+    parser.add_argument("--json", dest="json_path", default=None, metavar="FILE",
+                        help="--evaluate: also write the results as JSON to FILE")
     parser.add_argument("--write-launcher", metavar="DIR", default=None,
                         help="write DIR/Stub<Task>.x86_64, a Unity-build-like launcher of --task that "
                              "mlagents-learn --env DIR/Stub<Task> (or UnityEnvironment) can start, and exit")
@@ -97,6 +105,13 @@ def main(argv: list[str] | None = None) -> int:
     if not args.spin_wait_ms >= 0:
         print(f"unity-stub-env: --spin-wait-ms must be 0 or more, got {args.spin_wait_ms:g}.", file=sys.stderr)
         return 2
+    if args.evaluate:
+        if len(args.tasks) != 1:
+            print("unity-stub-env: --evaluate takes exactly one --task.", file=sys.stderr)
+            return 2
+        from unity_stub_env.evaluate import run as run_evaluation
+
+        return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path)
     if args.write_launcher is not None:
         path = write_player_launcher(args.write_launcher, args.tasks, extra_args=spin_wait_args(args.spin_wait_ms / 1e3))
         print(f"{path}  (use --env {path.with_suffix('')})")

@@ -3,7 +3,10 @@
 
 ``write_player_launcher(folder, ["ball3d"])`` writes ``folder/StubBall3D.x86_64``: a ``#!/bin/sh``
 script that execs this Python with ``-m unity_stub_env.cli --task ball3d`` and passes on every
-argument the launching tool adds (``--mlagents-port``, ``-logFile``, ``-nographics`` ...).
+argument the launching tool adds (``--mlagents-port``, ``-logFile``, ``-nographics`` ...). The
+folder holding this ``unity_stub_env`` leads the stub's PYTHONPATH, so the launcher runs this very
+code even when the launching tool drops PYTHONPATH (the ML-Agents peers do; a source checkout
+other than the one installed in the venv would otherwise run the installed one).
 Point the tool at ``folder/StubBall3D`` (without the suffix), as at a Unity build.
 """
 from __future__ import annotations
@@ -32,7 +35,9 @@ def write_player_launcher(folder: str | Path, tasks: list[str], python: str | No
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{player_name(tasks)}.x86_64"
+    root = Path(__file__).resolve().parents[1]
     command = [python or sys.executable, "-m", "unity_stub_env.cli", "--task", ",".join(tasks), *(extra_args or [])]
-    path.write_text("#!/bin/sh\nexec " + " ".join(shlex.quote(part) for part in command) + ' "$@"\n')
+    path.write_text("#!/bin/sh\nexec env PYTHONPATH=" + shlex.quote(str(root)) + '"${PYTHONPATH:+:$PYTHONPATH}" '
+                    + " ".join(shlex.quote(part) for part in command) + ' "$@"\n')
     path.chmod(path.stat().st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)
     return path
