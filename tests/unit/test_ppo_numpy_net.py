@@ -3,10 +3,10 @@ every change of their weights and normalisers by themselves: they are views, not
 import numpy as np
 import torch
 
-from trainer.ppo.numpy_net import NumpyActor, supports
+from protos.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.networks import Actor
-from trainer.protocol.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
+from trainer.ppo.numpy_net import NumpyActor, supports
 
 HP = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
 

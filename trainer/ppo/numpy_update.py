@@ -48,10 +48,10 @@ import time
 
 import numpy as np
 
+from trainer.envs.cpus import usable_cpus
 from trainer.ppo import numpy_net
 from trainer.ppo.adam import Adam, Stretch
 from trainer.ppo.distributions import EPSILON, MASKED_LOGIT_OFFSET
-from trainer.protocol.pacing import usable_cpus
 
 logger = logging.getLogger(__name__)
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
