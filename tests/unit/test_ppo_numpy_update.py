@@ -230,7 +230,7 @@ def test_a_child_that_hangs_or_dies_is_reaped_and_the_parent_steps_the_critic(ho
     sequential = _filled_trainer(spec, False)
     sequential.update()
     monkeypatch.setattr(numpy_update, "FORK_MIN_WORK", 0.0)
-    monkeypatch.setattr(numpy_update, "FORK_TIMEOUT_MIN", 1.0)
+    monkeypatch.setattr(numpy_update, "FORK_TIMEOUT_MIN", 1.0 if how == "hang" else 120.0)  # a dying child: no timeout
     monkeypatch.setattr(numpy_update, "FORK_TIMEOUT_FACTOR", 0.0)
     monkeypatch.setattr(numpy_update.NumpyPPO, "critic_step", _misbehaving_child(how))
     children = []
