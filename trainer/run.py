@@ -36,7 +36,7 @@ from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
 from trainer.protocol import side_channels as sc
 from trainer.protocol.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer.rollout import AgentTracker, concat_masks
-from trainer.stop import STOP
+from trainer.stop import EXIT_STOPPED, STOP
 
 if TYPE_CHECKING:  # torch is imported only once the simulators are launched (see run_training)
     from trainer.behavior import BehaviorRunner
@@ -149,6 +149,8 @@ class RunState:
                                        opts.torch_settings.device or "cpu", training=not ck.inference)
         if ck.resume or (ck.inference and os.path.isfile(runner.paths.latest)):
             runner.restore(runner.paths.latest, reset_step=False)
+            if not ck.inference:  # summaries a killed run wrote after this checkpoint are void
+                self.reporter.resume_from(brain, runner.trainer.step)
         elif settings.init_path:
             runner.restore(settings.init_path, reset_step=True)
         runner.schedule_from_step()
@@ -249,9 +251,12 @@ class RunState:
 
     # ------------------------------------------------------------------ learning
     def learn(self, trajectories: list) -> None:
+        checkpointed = False
         for runner, traj in trajectories:
+            before = runner.last_checkpoint_step
             with self.timers.scope("process_trajectory"):
                 stats = runner.add_trajectory(traj, self.status)
+            checkpointed = checkpointed or runner.last_checkpoint_step != before
             for key, value in stats.items():
                 self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
         for runner in self.runners.values():
@@ -262,6 +267,16 @@ class RunState:
                     self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
             self._maybe_summarize(runner)
         self._update_curriculum()
+        if checkpointed:
+            self.save_status()
+
+    def save_status(self) -> None:
+        """training_status.json with the checkpoints and the curriculum's lessons as they are now.
+        Written with every periodic checkpoint too: a run killed without warning (SIGKILL, a node
+        failure) resumes from its last checkpoint with the lessons it had then."""
+        for name, lesson in self.params.lesson_numbers().items():
+            self.status.set_lesson_num(name, lesson)
+        self.status.save(os.path.join(self.run_dir, "run_logs", "training_status.json"))
 
     def _maybe_summarize(self, runner: BehaviorRunner) -> None:
         step = runner.trainer.step
@@ -402,6 +417,7 @@ def run_training(options) -> int:
                      make_routers(env.num_envs))
     for line in params.describe():
         logger.info(line)
+    stopped = False
     try:
         pool.launch()
         # while the simulators boot: import torch and the networks (seconds, on a small machine)
@@ -436,7 +452,8 @@ def run_training(options) -> int:
                 state.pending_reset = False
                 state.drop_trajectories()
                 results = pool.reset(state.drain_side_channels())
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # a stop signal (trainer.stop)
+        stopped = True
         logger.info("Learning was interrupted. Please wait while the graph is generated.")
     except UnityCommunicatorStoppedError:
         logger.info("The simulator closed the connection. Learning was interrupted. "
@@ -447,6 +464,9 @@ def run_training(options) -> int:
             finish_run(state)
         finally:
             pool.close()
+    if stopped and not ck.inference and not state.finished:
+        logger.info("Stopped before max_steps (exit status %d); continue this run with --resume.", EXIT_STOPPED)
+        return EXIT_STOPPED
     return 0
 
 
@@ -457,9 +477,7 @@ def finish_run(state: RunState) -> None:
         if runner.training and runner.trainer.step > 0:
             runner.save_checkpoint(state.status, final=True)
     if not state.options.checkpoint_settings.inference:  # inference leaves the training record alone
-        for name, lesson in state.params.lesson_numbers().items():
-            state.status.set_lesson_num(name, lesson)
-        state.status.save(os.path.join(run_dir, "run_logs", "training_status.json"))
+        state.save_status()
     state.timers.write(os.path.join(run_dir, "run_logs", "timers.json"))
     state.reporter.close()
     write_run_options(state.options, run_dir)
