@@ -149,11 +149,12 @@ class RunState:
                                        opts.torch_settings.device or "cpu", training=not ck.inference)
         if ck.resume or (ck.inference and os.path.isfile(runner.paths.latest)):
             runner.restore(runner.paths.latest, reset_step=False)
-            if not ck.inference:  # summaries a killed run wrote after this checkpoint are void
-                self.reporter.resume_from(brain, runner.trainer.step)
         elif settings.init_path:
             runner.restore(settings.init_path, reset_step=True)
         runner.schedule_from_step()
+        if ck.resume and not ck.inference:
+            # what a run killed without warning wrote after its last checkpoint is void
+            self.reporter.resume_from(brain, runner.next_summary - 1)
         self.runners[brain] = runner
         self.reporter.add_property(brain, PROPERTY_HYPERPARAMETERS, settings_as_dict(settings))
         return runner
@@ -281,12 +282,26 @@ class RunState:
     def _maybe_summarize(self, runner: BehaviorRunner) -> None:
         step = runner.trainer.step
         if step >= runner.next_summary:
-            for name, lesson in self.params.lesson_numbers().items():
-                self.reporter.add(runner.brain, f"Environment/Lesson Number/{name}", float(lesson),
-                                  StatsAggregationMethod.MOST_RECENT)
-            self.reporter.set(runner.brain, "Step", float(step))  # hidden from TensorBoard, a gauge
-            self.reporter.write(runner.brain, runner.next_summary, is_training=runner.training and not runner.done)
+            self._summarize(runner)
             while runner.next_summary <= step:
+                runner.next_summary += runner.settings.summary_freq
+
+    def _summarize(self, runner: BehaviorRunner) -> None:
+        for name, lesson in self.params.lesson_numbers().items():
+            self.reporter.add(runner.brain, f"Environment/Lesson Number/{name}", float(lesson),
+                              StatsAggregationMethod.MOST_RECENT)
+        self.reporter.set(runner.brain, "Step", float(runner.trainer.step))  # hidden from TensorBoard, a gauge
+        self.reporter.write(runner.brain, runner.next_summary, is_training=runner.training and not runner.done)
+
+    def summarize_partial(self) -> None:
+        """A stop before max_steps: the summary of the unfinished period now, under its label, so
+        the resumed run (which starts with the next period) neither repeats nor skips a label."""
+        for runner in self.runners.values():
+            period_start = runner.next_summary - runner.settings.summary_freq
+            if runner.training and not runner.done and runner.trainer.step > period_start:
+                logger.info("%s: summary of the unfinished period up to step %d, labelled %d.",
+                            runner.brain, runner.trainer.step, runner.next_summary)
+                self._summarize(runner)
                 runner.next_summary += runner.settings.summary_freq
 
     def _update_curriculum(self) -> None:
@@ -461,6 +476,8 @@ def run_training(options) -> int:
     finally:
         state.progress.close()
         try:
+            if stopped and not ck.inference:
+                state.summarize_partial()
             finish_run(state)
         finally:
             pool.close()
