@@ -12,8 +12,11 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.backend.event_processing.event_file_loader import LegacyEventFileLoader
+
+from tests.slurm.cluster import ROOT
 
 pytestmark = pytest.mark.slurm
 
@@ -149,3 +152,30 @@ def test_a_job_killed_without_warning_resumes_from_its_last_periodic_checkpoint(
     # the killed start's summaries after that period are not counted: the steps add up
     final = json.loads((run.parent / "run_logs" / "training_status.json").read_text())["Basic"]["final_checkpoint"]["steps"]
     assert abs(episode_steps(run) - final) < SUMMARY / 5
+
+
+def test_a_sweep_runs_one_array_element_per_seed_and_summarises_them(cluster, tmp_path):
+    cfg = tmp_path / "basic.yaml"
+    cfg.write_text(CONFIG.replace(f"max_steps: {MAX_STEPS}", "max_steps: 1000"))
+    results = tmp_path / "results"
+    sweep = [str(ROOT / "docker" / "slurm" / "sweep.sh"), str(cfg), "--seeds", "4-5",
+             "--set", "behaviors.Basic.hyperparameters.lambd=0.9", "--name", "sw", "--results-dir", str(results),
+             "--sbatch", f"--mem=1G --cpus-per-task=1 --output={tmp_path}/slurm-%A_%a.out", "--", "--env", "stub:basic"]
+    out = cluster.run(*sweep, cwd=ROOT).stdout
+    assert "2 elements (2 seeds x 1 settings)" in out, out
+    array = (results / "sweeps" / "sw" / "job_id").read_text().strip()
+    for task in (0, 1):
+        info = cluster.wait_for_state(f"{array}_{task}", ("COMPLETED", "FAILED", "CANCELLED"), timeout=240)
+        assert info["JobState"] == "COMPLETED", (info, (tmp_path / f"slurm-{array}_{task}.out").read_text()[-3000:])
+    for task, seed in ((0, 4), (1, 5)):  # one results folder per element, with its seed and override
+        written = yaml.safe_load((results / f"sw_{task}" / "configuration.yaml").read_text())
+        assert written["env_settings"]["seed"] == seed
+        assert written["behaviors"]["Basic"]["hyperparameters"]["lambd"] == 0.9
+    table = cluster.run(str(ROOT / "docker" / "slurm" / "sweep.sh"), "summary", str(results / "sweeps" / "sw"),
+                        cwd=ROOT).stdout.splitlines()
+    assert table[0].split() == ["element", "run_id", "seed", "behaviors.Basic.hyperparameters.lambd",
+                                "behavior", "step", "final", "reward"]
+    rows = [line.split() for line in table[1:]]
+    assert [r[:6] for r in rows] == [["0", "sw_0", "4", "0.9", "Basic", "1000"], ["1", "sw_1", "5", "0.9", "Basic", "1000"]]
+    for r in rows:
+        assert -1.0 <= float(r[6]) <= 1.0  # Basic's rewards: a mean return, not a placeholder
