@@ -475,6 +475,9 @@ def run_training(options) -> int:
                     "Please wait while the graph is generated.")
     finally:
         state.progress.close()
+        # a stop signal also counts when the simulators, signalled with the trainer (scancel, a
+        # preemption), closed the connection before the trainer reached its next safe point
+        stopped = stopped or STOP.requested is not None
         try:
             if stopped and not ck.inference:
                 state.summarize_partial()

@@ -12,6 +12,7 @@ import subprocess
 import sys
 
 import pytest
+import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from tests.integration.conftest import free_port_block, learn, run_with_signals
@@ -212,7 +213,23 @@ def test_sigint_saves_a_checkpoint_and_onnx(tmp_path, basic_config, env_no_proxy
                                   [("Basic. Step: 1000.", signal.SIGINT)])
     assert code == EXIT_STOPPED == 75, text  # unfinished: a batch script requeues on this status
     assert "Learning was interrupted" in text and "continue this run with --resume" in text
-    _assert_final_save(tmp_path / "results" / "stop", 1000)
+    run = tmp_path / "results" / "stop"
+    _assert_final_save(run, 1000)
+    # the stop summarised its unfinished period early (label: its end); the checkpoint says the
+    # resumed run continues with the next one
+    saved = json.loads((run / "run_logs/training_status.json").read_text())["Basic"]["final_checkpoint"]["steps"]
+    label = (saved // 1000 + 1) * 1000
+    checkpoint = torch.load(run / "Basic" / "checkpoint.pt", weights_only=True)
+    assert int(checkpoint["Summaries"]["next_step"]) == label + 1000
+    r = learn([str(basic_config(max_steps=label + 1000, interval=10_000_000, summary=1000, name="more.yaml")),
+               "--env", "stub:basic", "--run-id", "stop", "--resume", "--results-dir", str(tmp_path / "results"),
+               "--base-port", str(free_port_block())], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert f"at step {saved}" in r.stdout
+    steps = [s for s, _ in scalars(run / "Basic")[0]["Environment/Episode Length"]]
+    # each summary step once: 1000 .. label from the first process (label only if an episode
+    # ended in its few steps), label + 1000 from the resumed one
+    assert steps in ([*range(1000, label, 1000), label + 1000], [*range(1000, label + 1, 1000), label + 1000]), steps
 
 
 def test_a_second_signal_during_the_final_save_loses_nothing(tmp_path, basic_config, env_no_proxy):

@@ -179,3 +179,21 @@ def test_a_sweep_runs_one_array_element_per_seed_and_summarises_them(cluster, tm
     assert [r[:6] for r in rows] == [["0", "sw_0", "4", "0.9", "Basic", "1000"], ["1", "sw_1", "5", "0.9", "Basic", "1000"]]
     for r in rows:
         assert -1.0 <= float(r[6]) <= 1.0  # Basic's rewards: a mean return, not a placeholder
+
+
+def test_scancel_saves_and_ends_the_job_without_requeue(cluster, tmp_path):
+    """scancel sends TERM to every process of the job, the simulator included: the trainer still
+    counts it as a stop (exit 75, final checkpoint), but a cancelled job stays cancelled."""
+    job, log = submit(cluster, tmp_path)
+    wait_for_line(log, r"Basic\. Step: 1000\.")
+    cluster.run("scancel", job)
+    text = wait_for_line(log, r"train\.sbatch: (the trainer stopped|trainer exited)", timeout=60)
+    assert "exit 75) while Slurm ends the job (JobState=COMPLETING: cancelled or preempted): not requeued" in text, \
+        text[-3000:]
+    info = cluster.wait_for_state(job, ("CANCELLED", "COMPLETED", "FAILED"), timeout=60)
+    assert info["JobState"] == "CANCELLED" and info["Restarts"] == "0", info
+    time.sleep(2)  # a requeue would show within the credential lifetime (5 s here)
+    assert cluster.job(job)["JobState"] == "CANCELLED"
+    saved = int(re.findall(r"Basic-(\d+)\.onnx to ", text)[-1])
+    status = json.loads((tmp_path / "results" / f"basic-{job}" / "run_logs" / "training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] == saved >= 1000
