@@ -1,6 +1,11 @@
-"""A private one-node Slurm cluster for the tests: MUNGE, slurmctld and slurmd started by the
-test on this machine with their own configuration, ports, keys, state, spool and log folders
-under one temporary folder, and stopped again by the test (only the processes it started).
+"""A private Slurm cluster for the tests: MUNGE, slurmctld and slurmd started by the test on
+this machine with their own configuration, ports, keys, state, spool and log folders under one
+temporary folder, and stopped again by the test (only the processes it started).
+
+One node on 127.0.0.1, or (``netns=True``) two nodes, each a network namespace of its own with a
+veth pair into a bridge that the controller listens on: a job on node ``nb`` reaches the
+controller and the shared file system, but its loopback and ports are its own. The namespaces,
+veths and bridge are made (iproute2) and deleted by the test.
 
 Nothing here touches /etc/slurm or /etc/munge or a system-wide daemon: the client commands find
 this cluster through ``SLURM_CONF`` in :attr:`Cluster.env`.
@@ -36,7 +41,7 @@ def free_ports(n: int) -> list[int]:
 
 SLURM_CONF = """\
 ClusterName={cluster}
-SlurmctldHost={host}(127.0.0.1)
+SlurmctldHost={host}({ctld_addr})
 SlurmctldPort={ctld_port}
 SlurmdPort={slurmd_port}
 SlurmUser=root
@@ -70,15 +75,23 @@ MinJobAge=86400
 JobRequeue=1
 KillWait=30
 SlurmdParameters=config_overrides
-NodeName={node} NodeHostname={host} NodeAddr=127.0.0.1 CPUs={cpus} RealMemory={memory} State=UNKNOWN
-PartitionName=test Nodes={node} Default=YES MaxTime=INFINITE State=UP
+{node_lines}
+PartitionName=test Nodes={nodes} Default=YES MaxTime=INFINITE State=UP
 """
 
 
 class Cluster:
-    node = "n1"
-
-    def __init__(self) -> None:
+    def __init__(self, netns: bool = False) -> None:
+        self.netns = netns
+        tag = os.getpid() % 10000
+        if netns:  # (name, address, namespace); 10.237.<pid mod 250>.0/24 on bridge mlb<pid>
+            net = f"10.237.{os.getpid() % 250}"
+            self.bridge, self.ctld_addr = f"mlb{tag}", f"{net}.1"
+            self.nodes = [(n, f"{net}.{i + 2}", f"mlslurm{tag}{n}") for i, n in enumerate(("na", "nb"))]
+        else:
+            self.bridge, self.ctld_addr = None, "127.0.0.1"
+            self.nodes = [("n1", "127.0.0.1", None)]
+        self.made: list[list[str]] = []  # ip commands that undo what was made
         # short path: the MUNGE socket's path must fit a sockaddr_un (108 bytes)
         self.base = Path(tempfile.mkdtemp(prefix="mlalike-slurm-"))
         self.procs: list[subprocess.Popen] = []
@@ -91,8 +104,10 @@ class Cluster:
     # ------------------------------------------------------------------ start / stop
     def start(self) -> "Cluster":
         base = self.base
-        for sub in ("munge", "state", f"spool/{self.node}", "log"):
+        for sub in ("munge", "state", "log", *[f"spool/{n}" for n, _, _ in self.nodes]):
             (base / sub).mkdir(parents=True, exist_ok=True)
+        if self.netns:
+            self._make_network()
         os.chmod(base / "munge", 0o700)
         (base / "plugstack.conf").write_text("")
         key = base / "munge" / "munge.key"
@@ -105,16 +120,44 @@ class Cluster:
         self._wait(lambda: self.munge_socket.exists(), 20, "munged's socket")
         ctld_port, slurmd_port = free_ports(2)
         memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2**20
+        host = socket.gethostname()
+        memory = max(1024, int(memory * 0.8) // len(self.nodes))
+        node_lines = "\n".join(f"NodeName={n} NodeHostname={host} NodeAddr={addr} CPUs={os.cpu_count()} "
+                               f"RealMemory={memory} State=UNKNOWN" for n, addr, _ in self.nodes)
         (base / "slurm.conf").write_text(SLURM_CONF.format(
-            cluster=f"mlalike{os.getpid()}", host=socket.gethostname(), ctld_port=ctld_port,
-            slurmd_port=slurmd_port, munge_socket=self.munge_socket, base=base, node=self.node,
-            cpus=os.cpu_count(), memory=max(1024, int(memory * 0.8))))
+            cluster=f"mlalike{os.getpid()}", host=host, ctld_addr=self.ctld_addr, ctld_port=ctld_port,
+            slurmd_port=slurmd_port, munge_socket=self.munge_socket, base=base, node_lines=node_lines,
+            nodes=",".join(n for n, _, _ in self.nodes)))
         conf = self.env["SLURM_CONF"]
         self._spawn("slurmctld", [f"{SBIN}/slurmctld", "-D", "-i", "-f", conf])
-        self._spawn("slurmd", [f"{SBIN}/slurmd", "-D", "-f", conf, "-N", self.node])
-        self._wait(lambda: self.run("sinfo", "-h", "-n", self.node, "-o", "%t", check=False).stdout.strip() == "idle",
-                   90, f"node {self.node} to be idle")
+        for name, _, ns in self.nodes:  # nsenter execs slurmd: the Popen is slurmd
+            # nsenter, not `ip netns exec`: that also remounts /sys, without the cgroup tree slurmd reads
+            prefix = ["nsenter", f"--net=/run/netns/{ns}"] if ns else []
+            self._spawn(f"slurmd-{name}", [*prefix, f"{SBIN}/slurmd", "-D", "-f", conf, "-N", name])
+        names = ",".join(n for n, _, _ in self.nodes)
+        self._wait(lambda: self.run("sinfo", "-h", "-N", "-n", names, "-o", "%t", check=False).stdout.split()
+                   == ["idle"] * len(self.nodes), 90, f"nodes {names} to be idle")
         return self
+
+    def _ip(self, *args: str, undo: list[str] | None = None) -> None:
+        r = subprocess.run(["ip", *args], capture_output=True, text=True)
+        if r.returncode != 0:
+            raise RuntimeError(f"ip {' '.join(args)}: {r.stderr.strip()}")
+        if undo:
+            self.made.append(undo)
+
+    def _make_network(self) -> None:
+        self._ip("link", "add", "name", self.bridge, "type", "bridge", undo=["link", "del", self.bridge])
+        self._ip("addr", "add", f"{self.ctld_addr}/24", "dev", self.bridge)
+        self._ip("link", "set", self.bridge, "up")
+        for i, (_, addr, ns) in enumerate(self.nodes):
+            veth = f"{self.bridge}v{i}"
+            self._ip("netns", "add", ns, undo=["netns", "del", ns])
+            self._ip("link", "add", veth, "type", "veth", "peer", "name", "eth0", "netns", ns)
+            self._ip("link", "set", veth, "master", self.bridge, "up")
+            self._ip("-n", ns, "addr", "add", f"{addr}/24", "dev", "eth0")
+            self._ip("-n", ns, "link", "set", "eth0", "up")
+            self._ip("-n", ns, "link", "set", "lo", "up")
 
     def _spawn(self, name: str, cmd: list[str]) -> None:
         log = open(self.base / "log" / f"{name}.out", "wb")
@@ -151,7 +194,7 @@ class Cluster:
                 if not states:
                     break
                 time.sleep(0.5)
-        for proc in reversed(self.procs):  # slurmd, slurmctld, munged
+        for proc in reversed(self.procs):  # slurmd(s), slurmctld, munged
             if proc.poll() is None:
                 proc.terminate()
                 try:
@@ -159,6 +202,9 @@ class Cluster:
                 except subprocess.TimeoutExpired:
                     proc.kill()
                     proc.wait()
+        for undo in reversed(self.made):  # namespaces (their veth ends go with them), the bridge
+            subprocess.run(["ip", *undo], capture_output=True)
+        self.made.clear()
         shutil.rmtree(self.base, ignore_errors=True)
 
     # ------------------------------------------------------------------ client commands

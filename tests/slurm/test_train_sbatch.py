@@ -197,3 +197,28 @@ def test_scancel_saves_and_ends_the_job_without_requeue(cluster, tmp_path):
     saved = int(re.findall(r"Basic-(\d+)\.onnx to ", text)[-1])
     status = json.loads((tmp_path / "results" / f"basic-{job}" / "run_logs" / "training_status.json").read_text())
     assert status["Basic"]["final_checkpoint"]["steps"] == saved >= 1000
+
+
+def test_two_nodes_in_network_namespaces_a_requeued_job_resumes_on_the_other_node(cluster2, tmp_path):
+    """Nodes na and nb are network namespaces of their own (own loopback, own ports) sharing the
+    file system: the job starts on one, that node is drained, the warning signal requeues the job,
+    and it resumes on the other from the checkpoint the first wrote."""
+    job, log = submit(cluster2, tmp_path)
+    wait_for_line(log, r"Basic\. Step: 1000\.")
+    first = cluster2.job(job)["NodeList"]
+    other = {"na": "nb", "nb": "na"}[first]
+    cluster2.run("scontrol", "update", f"NodeName={first}", "State=DRAIN", "Reason=mlagents-like-test")
+    try:
+        cluster2.run("scancel", "--batch", "--signal=USR1", job)
+        info = cluster2.wait_for_state(job, ("COMPLETED", "FAILED", "CANCELLED"), timeout=300)
+    finally:
+        cluster2.run("scontrol", "update", f"NodeName={first}", "State=RESUME", check=False)
+    text = log.read_text()
+    assert info["JobState"] == "COMPLETED" and int(info["Restarts"]) == 1 and info["NodeList"] == other, info
+    before, after = text.split("(restart 1)")
+    assert f"(restart 0) on {first}:" in before and after.startswith(f" on {other}:"), text[:600]
+    saved = int(re.findall(r"Basic-(\d+)\.onnx to ", before)[-1])
+    resumed = int(re.search(r"Loaded \S+checkpoint\.pt for behavior Basic at step (\d+)", after).group(1))
+    assert resumed == saved
+    steps = tensorboard_steps(tmp_path / "results" / f"basic-{job}" / "Basic", "Environment/Episode Length")
+    assert len(steps) == len(set(steps)) and steps[-1] == MAX_STEPS and steps[0] == SUMMARY
