@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from protos.types import BehaviorSpec
 from trainer.artifacts.atomic import atomic_copy
 from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
@@ -21,7 +22,6 @@ from trainer.errors import UserError
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.trainer import PPOTrainer
-from trainer.protocol.types import BehaviorSpec
 
 logger = logging.getLogger("mlagents_like")
 

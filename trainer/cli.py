@@ -55,6 +55,7 @@ def version_lines() -> list[str]:
     # simulators by the whole torch import
     from importlib.metadata import PackageNotFoundError, version
 
+    from protos.versions import COMMUNICATION_VERSION
     from trainer import __version__
 
     def installed(name: str) -> str:
@@ -66,7 +67,7 @@ def version_lines() -> list[str]:
     return [
         "Version information:",
         f"  mlagents-like: {__version__},",
-        "  Communicator API: 1.5.0,",
+        f"  Communicator API: {COMMUNICATION_VERSION},",
         f"  PyTorch: {installed('torch')},",
         f"  NumPy: {installed('numpy')},",
         f"  Python: {platform.python_version()}",
@@ -78,6 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     limit_blas_threads()
     debug = "--debug" in argv
     setup_logging(debug)
+    from protos.errors import ProtocolError
     from trainer.errors import UserError
 
     try:
@@ -87,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         from trainer.config.support import check_supported
 
         check_supported(options)  # before the results folder or a simulator exists
-        from trainer.protocol.pacing import configured_spin
+        from trainer.envs.cpus import configured_spin
 
         configured_spin()  # a bad MLAGENTS_LIKE_SPIN_WAIT_MS is refused before the results folder exists
         print(LOGO)
@@ -99,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
         from trainer.run import run_training
 
         return run_training(options)
-    except UserError as err:
+    except (UserError, ProtocolError) as err:
         if debug:
             logger.exception("error")
         print(f"mlagents-like-learn: error: {err}", file=sys.stderr)

@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from protos import side_channels as sc
+from protos.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer.artifacts.console import ConsoleWriter, ProgressLine
 from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, GaugeWriter, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
@@ -28,13 +30,11 @@ from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
 from trainer.config.env_params import ConstantSampler
 from trainer.config.loader import write_run_options
-from trainer.config.settings import settings_as_dict
 from trainer.config.param_manager import EnvironmentParameterManager
+from trainer.config.settings import settings_as_dict
 from trainer.config.support import goal_conditioning_note
 from trainer.envs.pool import EnvPool, PoolSettings
 from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
-from trainer.protocol import side_channels as sc
-from trainer.protocol.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer.rollout import AgentTracker, concat_masks
 from trainer.stop import EXIT_STOPPED, STOP
 

@@ -2,10 +2,10 @@
 import numpy as np
 import torch
 
+from protos.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.ppo.fast_actor import NumpyActor, supports
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.networks import Actor
-from trainer.protocol.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
 
 HP = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
 

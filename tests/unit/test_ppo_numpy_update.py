@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
+from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.ppo import numpy_update
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer
-from trainer.protocol.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 
 
 def vec(n: int, name: str = "v") -> ObservationSpec:

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from google.protobuf import any_pb2
 
+from protos import side_channels as sc
 from protos.communicator_objects import training_analytics_pb2
-from trainer.errors import ProtocolError
-from trainer.protocol import side_channels as sc
-from trainer.protocol.types import StatsAggregationMethod
+from protos.errors import ProtocolError
+from protos.types import StatsAggregationMethod
 
 # --- the four observed wire examples of spec §4.2, byte for byte --------------------------------
 

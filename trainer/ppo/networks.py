@@ -18,7 +18,7 @@ from trainer.ppo.distributions import mask_logits
 from trainer.ppo.encoders import VectorInput, make_visual_encoder
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.layers import KAIMING_NORMAL, XAVIER_UNIFORM, hidden_layers, linear_layer
-from trainer.protocol.types import ActionSpec, ObservationSpec
+from protos.types import ActionSpec, ObservationSpec
 
 MODEL_EXPORT_VERSION = 3
 

@@ -35,7 +35,7 @@ from torch import nn
 from trainer.ppo import fast_actor
 from trainer.ppo.adam import Adam
 from trainer.ppo.distributions import EPSILON, MASKED_LOGIT_OFFSET
-from trainer.protocol.pacing import usable_cpus
+from trainer.envs.cpus import usable_cpus
 
 logger = logging.getLogger(__name__)
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))

@@ -23,7 +23,7 @@ from trainer.ppo.distributions import (
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.losses import combined_entropy
 from trainer.ppo.networks import Actor
-from trainer.protocol.types import ActionTuple, BehaviorSpec
+from protos.types import ActionTuple, BehaviorSpec
 
 CONTINUOUS_CLIP = 3.0
 _HALF_LOG_2PI = 0.5 * np.log(2 * np.pi)  # a float64 scalar: the Gaussian terms in float64, as before

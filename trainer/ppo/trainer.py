@@ -26,7 +26,7 @@ from trainer.ppo.networks import Critic
 from trainer.ppo.policy import Policy
 from trainer.ppo.reward_providers import Experience, make_providers
 from trainer.ppo.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
-from trainer.protocol.types import BehaviorSpec
+from protos.types import BehaviorSpec
 
 ADVANTAGE_STD_EPSILON = 1e-10
 logger = logging.getLogger("mlagents_like")

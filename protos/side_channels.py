@@ -8,7 +8,7 @@ so this module is the one import site for both the trainer and ``unity_stub_env`
 
 Channels (spec §4.2): engine configuration and environment parameters (trainer → Unity), float
 properties (both ways), stats (Unity → trainer) and training analytics (trainer → Unity, see
-``trainer.protocol.training_analytics``). Unknown channel ids are warned about once and skipped.
+``protos.training_analytics``). Unknown channel ids are warned about once and skipped.
 """
 from __future__ import annotations
 
@@ -20,19 +20,19 @@ from typing import Callable
 
 import numpy as np
 
-from trainer.errors import ProtocolError
-from trainer.protocol.side_channel_wire import (  # re-exported: framing and primitives
+from protos.errors import ProtocolError
+from protos.side_channel_wire import (  # re-exported: framing and primitives
     PayloadReader,
     PayloadWriter,
     pack_messages,
     unpack_messages,
 )
-from trainer.protocol.training_analytics import (  # re-exported: one import site for channels
+from protos.training_analytics import (  # re-exported: one import site for channels
     encode_training_behavior_initialized,
     encode_training_environment_initialized,
     hash_for_analytics,
 )
-from trainer.protocol.types import StatsAggregationMethod
+from protos.types import StatsAggregationMethod
 
 logger = logging.getLogger("mlagents_like")
 
