@@ -218,7 +218,7 @@ def test_sigint_saves_a_checkpoint_and_onnx(tmp_path, basic_config, env_no_proxy
     # the stop summarised its unfinished period early (label: its end); the checkpoint says the
     # resumed run continues with the next one
     saved = json.loads((run / "run_logs/training_status.json").read_text())["Basic"]["final_checkpoint"]["steps"]
-    label = (saved // 1000 + 1) * 1000
+    label = -(-saved // 1000) * 1000  # the end of the period holding the saved step
     checkpoint = torch.load(run / "Basic" / "checkpoint.pt", weights_only=True)
     assert int(checkpoint["Summaries"]["next_step"]) == label + 1000
     r = learn([str(basic_config(max_steps=label + 1000, interval=10_000_000, summary=1000, name="more.yaml")),

@@ -145,7 +145,7 @@ def test_a_job_killed_without_warning_resumes_from_its_last_periodic_checkpoint(
     per_file = raw_summary_steps(run)
     assert len(per_file) == 2 and set(per_file[0]) & set(per_file[1]), per_file  # steps written twice...
     labels = list(range(SUMMARY, MAX_STEPS + 1, SUMMARY))
-    period = -(-resumed // SUMMARY) * SUMMARY  # the killed start wrote its summary after the checkpoint
+    period = (resumed // SUMMARY + 1) * SUMMARY  # the killed start wrote this summary after the checkpoint
     assert period in per_file[0] and per_file[1][0] == period + SUMMARY, per_file
     for tag in ("Policy/Entropy", "Environment/Cumulative Reward"):  # ...shown once
         assert tensorboard_steps(run, tag) == labels, tag
