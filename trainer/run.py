@@ -29,8 +29,8 @@ from trainer.artifacts.training_status import TrainingStatus
 from trainer.config.env_params import ConstantSampler
 from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
-from trainer.config.param_manager import EnvironmentParameterManager
 from trainer.config.support import goal_conditioning_note
+from trainer.curriculum import EnvironmentParameterManager
 from trainer.envs.pool import EnvPool, PoolSettings
 from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
 from trainer.protocol import side_channels as sc

@@ -312,8 +312,4 @@ __all__ = [
     "environment_parameters_as_dict",
     "sampler_as_dict",
     "assign_seeds",
-    "EnvironmentParameterManager",
 ]
-
-# The manager lives in its own module; it is re-exported here so callers need one import path.
-from trainer.config.param_manager import EnvironmentParameterManager  # noqa: E402

@@ -1,4 +1,8 @@
-"""Which lesson every environment parameter is in, and when it advances (spec §6.7)."""
+"""Which lesson every environment parameter is in, and when it advances (spec §6.7).
+
+The run's curriculum state; the settings it works from (samplers, lessons, completion criteria)
+are the frozen ``trainer.config.env_params`` types read from the YAML.
+"""
 from __future__ import annotations
 
 import logging
