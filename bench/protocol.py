@@ -38,6 +38,7 @@ sys.path.insert(0, str(REPO))
 from trainer.protocol.server import UnityEndpoint  # noqa: E402
 from unity_stub_env.launcher import write_player_launcher
 from unity_stub_env import make_task  # noqa: E402
+from trainer.config.env_vars import EnvVars  # noqa: E402
 from trainer.protocol.pacing import spin_budget, stub_args  # noqa: E402
 
 INTEROP_PYTHON = REPO / ".venv-interop" / "bin" / "python"
@@ -46,8 +47,9 @@ OUT = Path(__file__).resolve().parent / "out"
 AGENTS_PER_AREA = {"basic": 1, "ball3d": 12}
 # as mlagents-like-learn decides for one simulator; the stub gets the same flag under
 # mlagents_envs (ii), so both trainers face the same simulator
-SPIN_WAIT = spin_budget(2)
-STUB_FLAGS = stub_args(SPIN_WAIT)
+ENV_VARS = EnvVars.from_environ()  # MLAGENTS_LIKE_SPIN_WAIT_MS, MLAGENTS_LIKE_TRANSPORT as for a run
+SPIN_WAIT = spin_budget(2, ENV_VARS.spin_wait_s)
+STUB_FLAGS = stub_args(SPIN_WAIT, ENV_VARS.transport)
 
 
 def free_port() -> int:
@@ -76,7 +78,8 @@ def bench_endpoint(task: str, num_areas: int, warmup: int, exchanges: int,
                    profile: bool = False, stub_profile: Path | None = None) -> dict:
     """(i): UnityEndpoint ⇄ stub process, zero-cost actions. Returns timing and counts."""
     port = free_port()
-    endpoint = UnityEndpoint(port=port, timeout_wait=60.0, spin_wait=SPIN_WAIT)
+    endpoint = UnityEndpoint(port=port, timeout_wait=60.0, spin_wait=SPIN_WAIT,
+                             transport=ENV_VARS.transport)
     endpoint.start()
     physics_file = Path(tempfile.mkstemp(prefix="stub_physics_", suffix=".json")[1])
     stub = launch_stub(task, port, num_areas, stub_profile, None if stub_profile else physics_file)

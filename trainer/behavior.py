@@ -98,8 +98,10 @@ class BehaviorRunner:
 
     @classmethod
     def create(cls, brain: str, spec: BehaviorSpec, settings, run_dir: str, seed: int, device: str,
-               training: bool) -> "BehaviorRunner":
-        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device)
+               training: bool, numpy_update: bool = True) -> "BehaviorRunner":
+        """``numpy_update``: MLAGENTS_LIKE_NUMPY_UPDATE (trainer.config.env_vars)."""
+        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
+                             numpy_update=numpy_update)
         runner = cls(brain, spec, settings, trainer, CheckpointPaths(run_dir, brain), training)
         os.makedirs(runner.paths.folder, exist_ok=True)
         return runner

@@ -6,8 +6,7 @@ import os
 import pytest
 
 from trainer.protocol import pacing
-from trainer.errors import ConfigError
-from trainer.protocol.pacing import LEAD_S, PacedWait, configured_spin, spin_budget, wait_paced
+from trainer.protocol.pacing import LEAD_S, PacedWait, spin_budget, stub_args, wait_paced
 
 
 @pytest.fixture
@@ -100,28 +99,18 @@ def test_negative_spin_is_off():
 ])
 def test_spin_budget_needs_a_cpu_per_process(monkeypatch, cpus, processes, expected):
     monkeypatch.setattr(pacing, "usable_cpus", lambda: cpus)
-    monkeypatch.delenv(pacing.SPIN_WAIT_ENV, raising=False)
-    assert spin_budget(processes) == expected
-
-
-@pytest.mark.parametrize("value, expected", [(None, 0.001), ("", 0.001), ("0", 0.0), ("2.5", 0.0025), (" 1 ", 0.001)])
-def test_configured_spin_reads_milliseconds(value, expected):
-    environ = {} if value is None else {"MLAGENTS_LIKE_SPIN_WAIT_MS": value}
-    assert configured_spin(environ) == pytest.approx(expected)
-
-
-@pytest.mark.parametrize("value", ["fast", "-1", "nan", "inf"])
-def test_configured_spin_refuses_anything_else(value):
-    with pytest.raises(ConfigError, match=f"MLAGENTS_LIKE_SPIN_WAIT_MS={value!r}"):
-        configured_spin({"MLAGENTS_LIKE_SPIN_WAIT_MS": value})
+    assert spin_budget(processes, 0.001) == expected
 
 
 def test_spin_budget_follows_the_setting(monkeypatch):
     monkeypatch.setattr(pacing, "usable_cpus", lambda: 4)
-    monkeypatch.setenv("MLAGENTS_LIKE_SPIN_WAIT_MS", "0")
-    assert spin_budget(2) == 0.0
-    monkeypatch.setenv("MLAGENTS_LIKE_SPIN_WAIT_MS", "3")
-    assert spin_budget(2) == pytest.approx(0.003)
+    assert spin_budget(2, 0.0) == 0.0
+    assert spin_budget(2, 0.003) == pytest.approx(0.003)
+
+
+def test_stub_args_pass_only_what_differs_from_the_stubs_defaults():
+    assert stub_args(0.0) == [] and stub_args(0.0, "http2") == []
+    assert stub_args(0.0025, "grpcio") == ["--spin-wait-ms", "2.5", "--transport", "grpcio"]
 
 
 def test_usable_cpus_is_the_affinity_mask():

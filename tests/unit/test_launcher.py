@@ -170,13 +170,19 @@ def test_stub_is_told_to_poll_and_a_unity_build_never_is():
     assert "--spin-wait-ms" not in build_launch_command("/b/G", 0, 5005, stub_spin_wait=0.0015)
 
 
+def test_stub_is_told_the_transport_and_a_unity_build_never_is():
+    stub = build_launch_command("stub:basic", 0, 5005, stub_transport="grpcio")
+    assert stub[:7] == [sys.executable, "-m", "unity_stub_env.cli", "--task", "basic", "--transport", "grpcio"]
+    assert "--transport" not in build_launch_command("stub:basic", 0, 5005, stub_transport="http2")
+    assert "--transport" not in build_launch_command("/b/G", 0, 5005, stub_transport="grpcio")
+
+
 @pytest.mark.parametrize("cpus, expected", [(1, 0.0), (2, 0.0), (3, 0.001)])
 def test_pool_polls_only_with_a_cpu_for_the_trainer_and_each_simulator(monkeypatch, cpus, expected):
     from trainer.envs.pool import EnvPool, PoolSettings
     from trainer.protocol import pacing
 
     monkeypatch.setattr(pacing, "usable_cpus", lambda: cpus)
-    monkeypatch.delenv(pacing.SPIN_WAIT_ENV, raising=False)
     settings = PoolSettings(env_path="stub:basic", env_args=(), base_port=5005, num_envs=2, num_areas=1,
                             seed=0, timeout_wait=5, bind="127.0.0.1", no_graphics=True,
                             no_graphics_monitor=False, log_folder=None)

@@ -122,19 +122,21 @@ def build_launch_command(
     seed: int | None = None,
     num_areas: int = 1,
     stub_spin_wait: float = 0.0,
+    stub_transport: str = "http2",
 ) -> list[str]:
     """The argv for worker ``worker_id``, in the order of spec §1.2.
 
     ``env_path`` is a resolved executable path or ``stub:TASK``. ``seed`` and ``num_areas`` are
     not command-line arguments (they travel in the initialization message); they are accepted so
     one set of env settings can be passed through, and ``num_areas`` is checked here.
-    ``stub_spin_wait`` (s) is passed to the stub as ``--spin-wait-ms`` (never to a Unity build).
+    ``stub_spin_wait`` (s) is passed to the stub as ``--spin-wait-ms``, ``stub_transport`` as
+    ``--transport`` unless it is the stub's default http2 (never to a Unity build).
     """
     if num_areas < 1:
         raise ConfigError(f"--num-areas must be at least 1, got {num_areas}.")
     if is_stub_env(env_path):
         command = [sys.executable, "-m", "unity_stub_env.cli", "--task", env_path[len(STUB_PREFIX):]]
-        command += stub_args(stub_spin_wait)
+        command += stub_args(stub_spin_wait, stub_transport)
     else:
         command = [env_path]
     extra = list(env_args or [])

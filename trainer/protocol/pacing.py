@@ -29,8 +29,6 @@ import time
 from typing import Callable
 
 LEAD_S = 0.5e-3  # stop blocking this long before the earliest expected answer
-DEFAULT_SPIN_S = 1.0e-3  # then poll for at most this long past it
-SPIN_WAIT_ENV = "MLAGENTS_LIKE_SPIN_WAIT_MS"  # the user's choice of that budget; 0 turns pacing off
 _HISTORY = 16
 # give the CPU to whatever else is runnable on it, before every poll (see above)
 yield_cpu = getattr(os, "sched_yield", lambda: None)
@@ -44,34 +42,18 @@ def usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
-def configured_spin(environ=os.environ) -> float:
-    """The polling budget in seconds: ``MLAGENTS_LIKE_SPIN_WAIT_MS`` if set, else 1 ms.
-    Raises ConfigError for anything but a number >= 0."""
-    value = environ.get(SPIN_WAIT_ENV, "").strip()
-    if not value:
-        return DEFAULT_SPIN_S
-    try:
-        ms = float(value)
-    except ValueError:
-        ms = math.nan
-    if not 0.0 <= ms < math.inf:
-        from trainer.errors import ConfigError
-
-        raise ConfigError(f"{SPIN_WAIT_ENV}={value!r} is not a number of milliseconds >= 0; "
-                          f"use e.g. {SPIN_WAIT_ENV}=1, or 0 to always sleep while waiting.")
-    return ms / 1e3
+def stub_args(spin_s: float, transport: str = "http2") -> list[str]:
+    """The stub's command-line arguments for a polling budget of ``spin_s`` s (none for 0) and
+    a gRPC ``transport`` (none for the stub's default, http2)."""
+    return ((["--spin-wait-ms", f"{spin_s * 1e3:g}"] if spin_s > 0 else [])
+            + (["--transport", transport] if transport != "http2" else []))
 
 
-def stub_args(spin_s: float) -> list[str]:
-    """The stub's command-line arguments for a polling budget of ``spin_s`` s (none for 0)."""
-    return ["--spin-wait-ms", f"{spin_s * 1e3:g}"] if spin_s > 0 else []
-
-
-def spin_budget(processes: int) -> float:
-    """``configured_spin()`` if each of ``processes`` busy processes (the trainer and its
-    simulators) has a CPU of its own, else 0: polling on a shared CPU would take it from the
-    process we wait for."""
-    return configured_spin() if usable_cpus() >= processes else 0.0
+def spin_budget(processes: int, spin_s: float) -> float:
+    """``spin_s`` (MLAGENTS_LIKE_SPIN_WAIT_MS: trainer.config.env_vars) if each of ``processes``
+    busy processes (the trainer and its simulators) has a CPU of its own, else 0: polling on a
+    shared CPU would take it from the process we wait for."""
+    return spin_s if usable_cpus() >= processes else 0.0
 
 
 class PacedWait:
