@@ -19,7 +19,6 @@ from google.protobuf.message import DecodeError
 
 from protos.communicator_objects import (
     header_pb2,
-    unity_input_pb2,
     unity_message_pb2,
     unity_output_pb2,
     unity_rl_initialization_output_pb2,

@@ -33,7 +33,6 @@ class ExportableActor(nn.Module):
         super().__init__()
         self.actor = actor
         self.n_obs = n_obs
-        self.has_continuous = actor.action_spec.continuous_size > 0
         self.has_discrete = len(actor.action_spec.discrete_branches) > 0
         self.has_memory = actor.network_body.lstm is not None
 

@@ -236,10 +236,6 @@ class StatsReporter:
         self._aggregators: dict[str, StatsAggregator] = {}
         self._lock = threading.RLock()
 
-    def add_writer(self, writer: Any) -> None:
-        with self._lock:
-            self.writers.append(writer)
-
     def aggregator(self, brain: str) -> StatsAggregator:
         """The brain's aggregator (created on first use)."""
         agg = self._aggregators.get(brain)

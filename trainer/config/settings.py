@@ -20,7 +20,6 @@ logger = logging.getLogger("mlagents_like")
 SCHEDULES = ("linear", "constant")
 ENCODER_TYPES = ("simple", "nature_cnn", "resnet", "match3", "fully_connected")
 CONDITIONING_TYPES = ("hyper", "none")
-REWARD_SIGNAL_NAMES = ("extrinsic", "curiosity", "gail", "rnd")
 TRAINER_TYPES = ("ppo", "sac", "poca")
 TRAINABLE_TRAINER_TYPES = ("ppo",)
 DEFAULT_CHECKPOINT_NAME = "checkpoint.pt"
@@ -192,11 +191,6 @@ class CheckpointSettings:
     def write_path(self) -> str:
         """results/<run-id>"""
         return os.path.join(self.results_dir, self.run_id)
-
-    @property
-    def run_logs_dir(self) -> str:
-        """results/<run-id>/run_logs"""
-        return os.path.join(self.write_path, "run_logs")
 
     @property
     def maybe_init_path(self) -> str | None:

@@ -187,13 +187,6 @@ class SimulatorProcess:
         self._process: subprocess.Popen | None = None
         self._log_handle: IO[bytes] | None = None
 
-    @classmethod
-    def for_env(cls, env_path: str, worker_id: int, base_port: int, *, debug: bool = False,
-                **launch_options) -> "SimulatorProcess":
-        """Resolve ``env_path`` and build the command (options as in ``build_launch_command``)."""
-        command = build_launch_command(resolve_env_path(env_path), worker_id, base_port, **launch_options)
-        return cls(command, worker_id=worker_id, debug=debug)
-
     @property
     def port(self) -> int | None:
         for flag, value in zip(self.command, self.command[1:]):
@@ -341,10 +334,3 @@ class RestartPolicy:
             return False
         self.record_restart(now)
         return True
-
-    def describe_limits(self) -> str:
-        lifetime = "unlimited" if self.max_lifetime_restarts == -1 else str(self.max_lifetime_restarts)
-        rate = ("no rate limit" if self.rate_limit_n == -1
-                else f"at most {self.rate_limit_n} per {self.rate_limit_period_s:g} s")
-        return (f"{self.restart_count} restarts so far; lifetime limit {lifetime} "
-                f"(--max-lifetime-restarts), {rate} (--restarts-rate-limit-n/-period-s)")
