@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 
 import pytest
 
@@ -113,10 +115,15 @@ def test_stub_args_pass_only_what_differs_from_the_stubs_defaults():
     assert stub_args(0.0025, "grpcio") == ["--spin-wait-ms", "2.5", "--transport", "grpcio"]
 
 
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity") or (os.cpu_count() or 1) < 2,
+                    reason="needs affinity masks and two CPUs to tell the mask from the CPU count")
 def test_usable_cpus_is_the_affinity_mask():
-    if not hasattr(os, "sched_getaffinity"):
-        pytest.skip("no affinity masks on this OS")
-    assert pacing.usable_cpus() == len(os.sched_getaffinity(0))
+    """In a child process pinned to one CPU (as taskset or a Slurm allocation would), the count
+    is 1 though the machine has more."""
+    code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
+            "from trainer.protocol.pacing import usable_cpus; print(usable_cpus(), os.cpu_count())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out[0] == "1" and int(out[1]) >= 2
 
 
 # --- wait_paced: the waiting itself, on a real socket pair ----------------------------------
