@@ -29,6 +29,12 @@ Reported per trainer:
                       itself (with mlagents-learn: and its env worker process) costs
   * mean reward (``Environment/Cumulative Reward``) at every summary step, side by side
 Then the speed ratios and whether our reward over the last 3 common summaries is no worse.
+
+``--reference-tree DIR`` replaces (2) with our own trainer from another source tree (e.g. a git
+worktree of an older commit, ``git worktree add /tmp/old <commit>``), run with ``PYTHONPATH=DIR``
+so its trainer and the stub it launches are both that tree's: an A/B of two versions of this
+project on the same YAML, seeds and ports, alternating which goes first. The ratio is then
+new/old (1.00 = no change; the 10x target does not apply).
 Prints a markdown table; writes JSON to ``<out>/train_<task>.json``.
 Target: ours >= 10x the reference's agent-steps/s with reward at equal steps no worse.
 """
@@ -268,6 +274,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--out", type=Path, default=REPO / "bench" / "out")
     parser.add_argument("--timeout", type=float, default=3600.0, help="per trainer, seconds")
+    parser.add_argument("--reference-tree", type=Path, default=None,
+                        help="A/B against our trainer from this source tree instead of mlagents-learn")
     parser.add_argument("--pairs", type=int, default=1,
                         help="run N pairs, alternating which trainer goes first, and report every pair's "
                              "ratio and their median (this machine's speed drifts between runs)")
@@ -277,7 +285,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     source = args.config or REPO / "configs" / f"{args.task}.yaml"
-    for needed in (OUR_LEARN, REFERENCE_LEARN):
+    for needed in (OUR_LEARN,) if args.reference_tree else (OUR_LEARN, REFERENCE_LEARN):
         if not needed.exists():
             print(f"missing {needed}: run ./scripts/ensure_interop_venv.sh / install the project")
             return 2
@@ -286,6 +294,12 @@ def main(argv: list[str] | None = None) -> int:
     subprocess.run([str(REPO / "scripts" / "ensure_venv.sh")], check=True)
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)  # neither trainer may see the other's packages
+    reference_env = env
+    if args.reference_tree:
+        tree = args.reference_tree.resolve()
+        subprocess.run([str(OUR_PYTHON), "-m", "compileall", "-q", *(str(tree / p) for p in
+                        ("trainer", "unity_stub_env", "protos"))], check=True, stdout=subprocess.DEVNULL)
+        reference_env = {**env, "PYTHONPATH": str(tree)}
     args.out.mkdir(parents=True, exist_ok=True)
     pairs = []
     with tempfile.TemporaryDirectory(prefix=f"bench_train_{args.task}_") as tmp:
@@ -299,8 +313,11 @@ def main(argv: list[str] | None = None) -> int:
             runs = {
                 "ours": lambda f=pair_folder: train("ours", OUR_LEARN, f"stub:{args.task}", config_path,
                                                     f / "ours", args, behavior, env),
-                "reference": lambda f=pair_folder: train("reference", REFERENCE_LEARN, str(exe.with_suffix("")),
-                                                         config_path, f / "reference", args, behavior, env),
+                "reference": (lambda f=pair_folder: train("reference", OUR_LEARN, f"stub:{args.task}", config_path,
+                                                          f / "reference", args, behavior, reference_env))
+                if args.reference_tree else
+                (lambda f=pair_folder: train("reference", REFERENCE_LEARN, str(exe.with_suffix("")),
+                                             config_path, f / "reference", args, behavior, env)),
             }
             order = ["ours", "reference"] if index % 2 == 0 else ["reference", "ours"]
             done = {name: runs[name]() for name in order}
