@@ -35,11 +35,11 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from trainer.envs.cpus import spin_budget  # noqa: E402
 from trainer.protocol.server import UnityEndpoint  # noqa: E402
-from unity_stub_env.launcher import write_player_launcher
 from unity_stub_env import make_task  # noqa: E402
 from trainer.config.env_vars import EnvVars  # noqa: E402
-from trainer.protocol.pacing import spin_budget, stub_args  # noqa: E402
+from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher  # noqa: E402
 
 INTEROP_PYTHON = REPO / ".venv-interop" / "bin" / "python"
 PEER = Path(__file__).resolve().parent / "peers" / "mlagents_envs_rollout.py"
@@ -47,9 +47,14 @@ OUT = Path(__file__).resolve().parent / "out"
 AGENTS_PER_AREA = {"basic": 1, "ball3d": 12}
 # as mlagents-like-learn decides for one simulator; the stub gets the same flag under
 # mlagents_envs (ii), so both trainers face the same simulator
-ENV_VARS = EnvVars.from_environ()  # MLAGENTS_LIKE_SPIN_WAIT_MS, MLAGENTS_LIKE_TRANSPORT as for a run
-SPIN_WAIT = spin_budget(2, ENV_VARS.spin_wait_s)
-STUB_FLAGS = stub_args(SPIN_WAIT, ENV_VARS.transport)
+SPIN_WAIT = spin_budget(2, EnvVars.from_environ().spin_wait_s)
+STUB_FLAGS = spin_wait_args(SPIN_WAIT)
+
+
+def transport() -> str:
+    """MLAGENTS_LIKE_TRANSPORT as a run would read it, at each call (bench/transport.py sets it
+    between runs): the endpoint's server and, by flag, the stub's client."""
+    return EnvVars.from_environ().transport
 
 
 def free_port() -> int:
@@ -69,7 +74,7 @@ def launch_stub(task: str, port: int, num_areas: int, profile_to: Path | None = 
         command += [str(Path(__file__).parent / "peers" / "timed_stub.py"), str(physics_to)]
     else:
         command += ["-m", "unity_stub_env.cli"]
-    command += ["--task", task, *STUB_FLAGS, "--mlagents-port", str(port),
+    command += ["--task", task, *STUB_FLAGS, *transport_args(transport()), "--mlagents-port", str(port),
                 "--num-areas", str(num_areas), "-nographics", "-batchmode", "-logFile", os.devnull]
     return subprocess.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
@@ -79,7 +84,7 @@ def bench_endpoint(task: str, num_areas: int, warmup: int, exchanges: int,
     """(i): UnityEndpoint ⇄ stub process, zero-cost actions. Returns timing and counts."""
     port = free_port()
     endpoint = UnityEndpoint(port=port, timeout_wait=60.0, spin_wait=SPIN_WAIT,
-                             transport=ENV_VARS.transport)
+                             transport=transport())
     endpoint.start()
     physics_file = Path(tempfile.mkstemp(prefix="stub_physics_", suffix=".json")[1])
     stub = launch_stub(task, port, num_areas, stub_profile, None if stub_profile else physics_file)
@@ -124,7 +129,7 @@ def bench_mlagents_envs(task: str, num_areas: int, warmup: int, exchanges: int) 
     if not INTEROP_PYTHON.exists():
         return None
     with tempfile.TemporaryDirectory() as folder:
-        exe = write_player_launcher(folder, [task], extra_args=STUB_FLAGS)
+        exe = write_player_launcher(folder, [task], extra_args=STUB_FLAGS + transport_args(transport()))
         options = {"file_name": str(exe.with_suffix("")), "base_port": free_port(),
                    "num_areas": num_areas, "warmup": warmup, "exchanges": exchanges}
         env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
@@ -158,12 +163,12 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
 
     Replays what both ends do around one exchange, with the stub's own Academy and our codec:
     stub physics (advance), stub encode (collect_encoded + step_message_bytes),
-    trainer decode (parse + decode_rl_output), trainer encode (fill_rl_input + serialize),
+    trainer decode (codec.decode_message), trainer encode (codec.encode_answer),
     stub decode (parse + apply_action_list). Whatever the real run takes beyond the sum is gRPC
     transport plus thread/process hand-offs.
     """
     from protos.communicator_objects import unity_message_pb2
-    from trainer.protocol import codec, records
+    from trainer.protocol import codec
     from unity_stub_env.academy import Academy
     from unity_stub_env.agents import build_brain_parameters
     from unity_stub_env.communicator import step_message_bytes
@@ -175,25 +180,16 @@ def bench_breakdown(task_name: str, num_areas: int, exchanges: int) -> dict:
     totals = dict.fromkeys(("stub_physics", "stub_encode", "trainer_decode", "trainer_encode", "stub_decode"), 0.0)
     clock = time.perf_counter
     brains = [build_brain_parameters(spec_key, task.action_spec)]  # sent with the first message only
-    large_lists = True  # as UnityEndpoint: look for lists to decode from bytes while the last had one
     for _ in range(exchanges):
         t0 = clock()
         wire_up = step_message_bytes([(spec_key, academy.collect_encoded().data)], b"", [] if known else brains)
         t1 = clock()
-        # as UnityEndpoint._wait_for_call + receive: large agent lists are decoded from the bytes
-        split = records.split_agent_lists(wire_up, records.MIN_ROWS) if large_lists else None
-        body, raw_lists = split if split is not None else (wire_up, None)
-        request = unity_message_pb2.UnityMessageProto.FromString(body)
-        result = codec.decode_rl_output(request.unity_output, known, raw_lists)
+        result = codec.decode_message(wire_up, known).result  # as UnityEndpoint._wait_for_call
         known.update(result.specs)
         deciding = len(result.steps[spec_key][0])
-        large_lists = deciding + len(result.steps[spec_key][1]) >= records.MIN_ROWS
         actions = {spec_key: known[spec_key].action_spec.empty_action(deciding)}
         t2 = clock()
-        response = unity_message_pb2.UnityMessageProto()
-        response.header.status = 200
-        codec.fill_rl_input(response.unity_input.rl_input, actions, b"", codec.STEP)
-        wire_down = response.SerializeToString()
+        wire_down = codec.encode_answer(actions, b"")
         t3 = clock()
         answer = unity_message_pb2.UnityMessageProto.FromString(wire_down)
         academy.apply_action_list(answer.unity_input.rl_input.agent_actions.get(spec_key))

@@ -1,6 +1,6 @@
 """Training benchmark (run by hand, not a test): our trainer vs the real ``mlagents-learn`` 1.1.0.
 
-    .venv/bin/python bench/train.py [--task basic|ball3d] [--config YAML] [--max-steps N]
+    .venv/bin/python bench/train.py [--task basic|ball3d|dodge] [--config YAML] [--max-steps N]
                                     [--num-areas N] [--seed S] [--out bench/out]
 
 One run trains the same stub task with the same YAML twice, one process after the other:
@@ -9,7 +9,7 @@ One run trains the same stub task with the same YAML twice, one process after th
                  launcher that execs this interpreter's ``-m unity_stub_env.cli --task TASK``.
 Both get the same ``--seed``, ``--num-areas``, a fresh results dir and a fresh port, and the same
 simulator: the launcher passes the stub the ``--spin-wait-ms`` that our trainer passes it for one
-environment on this machine (trainer/protocol/pacing.py).
+environment on this machine (protos/pacing.py, trainer/envs/cpus.py).
 
 The YAML is copied to a temp dir and, for BOTH trainers alike, ``max_steps`` is overridden when
 ``--max-steps`` is given and ``checkpoint_interval`` is raised above ``max_steps``: mlagents 1.1.0
@@ -57,8 +57,8 @@ from pathlib import Path
 import yaml
 
 from trainer.config.env_vars import EnvVars
-from trainer.protocol.pacing import spin_budget, stub_args
-from unity_stub_env.launcher import write_player_launcher
+from trainer.envs.cpus import spin_budget
+from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 REPO = Path(__file__).resolve().parents[1]
@@ -91,7 +91,9 @@ def stub_launcher(folder: Path, task: str) -> Path:
     """``folder/Stub<Task>.x86_64``: a Unity-build-like shell launcher of the stub (our venv's Python)."""
     # the stub polls as mlagents-like-learn would have it poll for --num-envs 1 (trainer/envs/pool.py)
     env_vars = EnvVars.from_environ()
-    return write_player_launcher(folder, [task], python=str(OUR_PYTHON), extra_args=stub_args(spin_budget(2, env_vars.spin_wait_s), env_vars.transport))
+    return write_player_launcher(folder, [task], python=str(OUR_PYTHON),
+                                 extra_args=spin_wait_args(spin_budget(2, env_vars.spin_wait_s))
+                                 + transport_args(env_vars.transport))
 
 
 def write_bench_config(source: Path, target: Path, max_steps: int | None) -> dict:
@@ -267,7 +269,7 @@ def markdown(task: str, ours: dict, reference: dict, verdict: dict) -> str:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--task", choices=("basic", "ball3d"), default="ball3d")
+    parser.add_argument("--task", choices=("basic", "ball3d", "dodge"), default="ball3d")
     parser.add_argument("--config", type=Path, default=None, help="default configs/<task>.yaml")
     parser.add_argument("--max-steps", type=int, default=None)
     parser.add_argument("--num-areas", type=int, default=None)

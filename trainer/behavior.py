@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from protos.types import BehaviorSpec
 from trainer.artifacts.atomic import atomic_copy
 from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
@@ -20,7 +21,6 @@ from trainer.errors import UserError
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.trainer import PPOTrainer
-from trainer.protocol.types import BehaviorSpec
 
 logger = logging.getLogger("mlagents_like")
 
@@ -98,10 +98,10 @@ class BehaviorRunner:
 
     @classmethod
     def create(cls, brain: str, spec: BehaviorSpec, settings, run_dir: str, seed: int, device: str,
-               training: bool, numpy_update: bool = True) -> "BehaviorRunner":
-        """``numpy_update``: MLAGENTS_LIKE_NUMPY_UPDATE (trainer.config.env_vars)."""
+               training: bool, use_numpy_update: bool = True) -> "BehaviorRunner":
+        """``use_numpy_update``: MLAGENTS_LIKE_NUMPY_UPDATE (trainer.config.env_vars)."""
         trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
-                             numpy_update=numpy_update)
+                             use_numpy_update=use_numpy_update)
         runner = cls(brain, spec, settings, trainer, CheckpointPaths(run_dir, brain), training)
         os.makedirs(runner.paths.folder, exist_ok=True)
         return runner

@@ -64,6 +64,7 @@ def version_lines() -> list[str]:
     # simulators by the whole torch import
     from importlib.metadata import PackageNotFoundError, version
 
+    from protos.versions import COMMUNICATION_VERSION
     from trainer import __version__
 
     def installed(name: str) -> str:
@@ -75,7 +76,7 @@ def version_lines() -> list[str]:
     return [
         "Version information:",
         f"  mlagents-like: {__version__},",
-        "  Communicator API: 1.5.0,",
+        f"  Communicator API: {COMMUNICATION_VERSION},",
         f"  PyTorch: {installed('torch')},",
         f"  NumPy: {installed('numpy')},",
         f"  Python: {platform.python_version()}",
@@ -86,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
     setup_logging(debug)
+    from protos.errors import ProtocolError
     from trainer.errors import UserError
 
     try:
@@ -105,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         from trainer.run import run_training
 
         return run_training(options, env_vars)
-    except UserError as err:
+    except (UserError, ProtocolError) as err:
         if debug:
             logger.exception("error")
         print(f"mlagents-like-learn: error: {err}", file=sys.stderr)

@@ -1,7 +1,9 @@
 """Errors a user can act on. Each carries one message that names the thing and what to do.
 
 The CLI turns any ``UserError`` into that one message on stderr and exit code 2 (no traceback
-unless ``--debug``). Everything else is a bug and keeps its traceback.
+unless ``--debug``), and so does ``protos.errors.ProtocolError`` (a message from the simulator
+we cannot make sense of), which the wire package shares with the simulator. Everything else is a
+bug and keeps its traceback.
 """
 from __future__ import annotations
 
@@ -34,10 +36,6 @@ class SimulatorExitedError(UserError):
 
 class UnityVersionError(UserError):
     """The simulator speaks an incompatible communication API version."""
-
-
-class ProtocolError(UserError):
-    """The simulator sent a message we cannot make sense of (garbled, NaN reward, bad shapes)."""
 
 
 class UnityCommunicatorStoppedError(Exception):

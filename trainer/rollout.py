@@ -25,8 +25,8 @@ from typing import Callable
 
 import numpy as np
 
+from protos.types import BehaviorSpec, DecisionSteps, TerminalSteps
 from trainer.ppo.buffer import Trajectory
-from trainer.protocol.types import BehaviorSpec, DecisionSteps, TerminalSteps
 
 
 @dataclass

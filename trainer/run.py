@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from protos import side_channels as sc
+from protos.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer.artifacts.console import ConsoleWriter, ProgressLine
 from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, GaugeWriter, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
@@ -34,8 +36,6 @@ from trainer.config.support import goal_conditioning_note
 from trainer.curriculum import EnvironmentParameterManager
 from trainer.envs.pool import EnvPool, PoolSettings
 from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
-from trainer.protocol import side_channels as sc
-from trainer.protocol.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer.rollout import AgentTracker, concat_masks
 from trainer.stop import STOP
 
@@ -149,7 +149,7 @@ class RunState:
         seed = opts.env_settings.seed + len(self.runners)
         runner = BehaviorRunner.create(brain, spec, settings, self.run_dir, seed,
                                        opts.torch_settings.device or "cpu", training=not ck.inference,
-                                       numpy_update=self.env_vars.numpy_update)
+                                       use_numpy_update=self.env_vars.numpy_update)
         if ck.resume or (ck.inference and os.path.isfile(runner.paths.latest)):
             runner.restore(runner.paths.latest, reset_step=False)
         elif settings.init_path:

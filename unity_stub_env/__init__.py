@@ -3,14 +3,22 @@ built with ML-Agents (communication API 1.5.0). See ``unity_stub_env.cli`` for t
 
 ``TASKS`` and ``make_task`` (``unity_stub_env.tasks``) are loaded on first use: importing the
 tasks imports MuJoCo (~0.3 s), which the trainer must not pay when it only checks a task name
-(``unity_stub_env.task_names``) before launching the stub."""
+before launching the stub.
+
+This module is the stub's public API for other packages (the trainer uses nothing else):
+``TASK_NAMES``, ``spin_wait_args``, ``transport_args`` and ``write_player_launcher`` (cheap), ``TASKS`` and
+``make_task`` (loaded on first use)."""
 from __future__ import annotations
 
-__all__ = ["TASKS", "make_task"]
+from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher
+from unity_stub_env.task_names import TASK_NAMES
+
+__all__ = ["TASK_NAMES", "TASKS", "make_task", "spin_wait_args", "transport_args", "write_player_launcher"]
+_LAZY = ("TASKS", "make_task")
 
 
 def __getattr__(name: str):
-    if name in __all__:
+    if name in _LAZY:
         from unity_stub_env import tasks
 
         return getattr(tasks, name)

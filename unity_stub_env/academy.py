@@ -24,8 +24,8 @@ from typing import Sequence
 
 import numpy as np
 
+from protos import records
 from protos.communicator_objects import agent_action_pb2, agent_info_pb2
-from trainer.protocol import records
 from unity_stub_env.agents import EncodedInfos, EpisodeIdCounter, encode_agent_infos
 from unity_stub_env.tasks.base import Stat, Task
 
@@ -115,7 +115,7 @@ class Academy:
 
     def apply_action_list(self, actions) -> None:
         """``apply_actions`` for a ListAgentActionProto (or None): many agents are read from its
-        serialized bytes at once (``trainer.protocol.records``), few or unusual ones one by one."""
+        serialized bytes at once (``protos.records``), few or unusual ones one by one."""
         if actions is None:
             self.apply_actions([])
             return

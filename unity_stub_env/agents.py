@@ -10,13 +10,13 @@ from typing import Sequence
 
 import numpy as np
 
+from protos import wire
 from protos.communicator_objects import (
     agent_info_pb2,
     brain_parameters_pb2,
     space_type_pb2,
 )
-from trainer.protocol import wire
-from trainer.protocol.types import ActionSpec, ObservationSpec
+from protos.types import ActionSpec, ObservationSpec
 
 
 # AgentInfoProto fields (spec §2) in number order: reward 7 (float), done 8, max_step_reached 9,
@@ -65,7 +65,7 @@ def encode_agent_infos(
     done and max_step_reached when false, episode id 0), varints in their shortest form. Each
     agent's ObservationProtos are shape, float_data, dimension_properties, observation_type, name.
 
-    All records are laid out as one byte matrix (trainer.protocol.wire) with every field and id
+    All records are laid out as one byte matrix (protos.wire) with every field and id
     byte that any of them needs; when records differ (a zero reward beside others, ids of
     several varint lengths, some agents interrupted), a byte mask then drops what each record
     leaves out, which also joins the records of different lengths.
@@ -148,8 +148,7 @@ def _encode_few(observation_specs, observations, rewards, ids, done, max_step, m
             parts += [mask_prefix, masks[row].tobytes()]
         for (head, tail), obs in zip(frames, flat_obs):
             parts += [head, obs[row].tobytes(), tail]
-        content = b"".join(parts)
-        records.append(wire.len_prefix(1, len(content)) + content)
+        records.append(wire.field(1, b"".join(parts)))
     return EncodedInfos(b"".join(records), len(ids))
 
 

@@ -4,6 +4,7 @@
                    [--num-areas N] [--seed S] [--decision-period K] [--connect-timeout T]
                    [--spin-wait-ms MS] [--transport {http2,grpcio}]
     unity-stub-env --list
+    unity-stub-env --task dodge --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
@@ -20,12 +21,10 @@ import resource
 import signal
 import sys
 
-from trainer.fast_exit import exit_now
-from trainer.protocol.pacing import stub_args
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter, build_brain_parameters
-from unity_stub_env.launcher import write_player_launcher
 from unity_stub_env.communicator import TRANSPORTS, RpcCommunicator, SessionEnd, SideChannelState, encode_stats
+from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher
 from unity_stub_env.tasks import TASKS, EnvironmentParameters, make_task
 
 logger = logging.getLogger("unity_stub_env")
@@ -57,6 +56,13 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the gRPC client: http2 (the stub's own, single-threaded; default) or grpcio "
                              "(mlagents-like-learn passes the transport its server uses)")
     parser.add_argument("--list", action="store_true", help="list the tasks with their specs and exit")
+    parser.add_argument("--evaluate", action="append", metavar="POLICY", default=None,
+                        help="run --task's scripted evaluation (no trainer) with POLICY: a trained .onnx, "
+                             "'zero' or 'random' (the last two are always shown beside it); repeatable")
+    parser.add_argument("--episodes", type=int, default=500,
+                        help="--evaluate: random throws after the scripted ones (default 500)")
+    parser.add_argument("--json", dest="json_path", default=None, metavar="FILE",
+                        help="--evaluate: also write the results as JSON to FILE")
     parser.add_argument("--write-launcher", metavar="DIR", default=None,
                         help="write DIR/Stub<Task>.x86_64, a Unity-build-like launcher of --task that "
                              "mlagents-learn --env DIR/Stub<Task> (or UnityEnvironment) can start, and exit")
@@ -105,8 +111,16 @@ def main(argv: list[str] | None = None) -> int:
     if not args.spin_wait_ms >= 0:
         print(f"unity-stub-env: --spin-wait-ms must be 0 or more, got {args.spin_wait_ms:g}.", file=sys.stderr)
         return 2
+    if args.evaluate:
+        if len(args.tasks) != 1:
+            print("unity-stub-env: --evaluate takes exactly one --task.", file=sys.stderr)
+            return 2
+        from unity_stub_env.evaluate import run as run_evaluation
+
+        return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path)
     if args.write_launcher is not None:
-        path = write_player_launcher(args.write_launcher, args.tasks, extra_args=stub_args(args.spin_wait_ms / 1e3, args.transport))
+        path = write_player_launcher(args.write_launcher, args.tasks,
+                                     extra_args=spin_wait_args(args.spin_wait_ms / 1e3) + transport_args(args.transport))
         print(f"{path}  (use --env {path.with_suffix('')})")
         return 0
     if args.mlagents_port is None:
@@ -198,7 +212,13 @@ def entry() -> None:
     """The executable: ``main``, then an immediate exit, like a Unity player quitting. The log
     is flushed and closed and the connection answered by then; skipping the interpreter's
     teardown of numpy and MuJoCo (~50 ms, measured) lets the trainer finish that much sooner."""
-    exit_now(main())
+    code = main()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
 
 
 if __name__ == "__main__":

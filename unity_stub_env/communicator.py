@@ -17,23 +17,21 @@ import uuid
 
 from google.protobuf.message import DecodeError
 
+from protos import side_channels as sc
+from protos import wire
 from protos.communicator_objects import (
     header_pb2,
     unity_message_pb2,
     unity_output_pb2,
     unity_rl_initialization_output_pb2,
 )
-from trainer.protocol import side_channels as sc
-from trainer.protocol import wire
-from trainer.protocol.codec import HEADER_OK_FIELD, all_true_capabilities
-from trainer.protocol.http2 import CallError, Http2Channel
+from protos.versions import COMMUNICATION_VERSION, UNITY_PACKAGE_VERSION, all_true_capabilities
+from unity_stub_env.http2_client import CallError, Http2Channel
 from unity_stub_env.tasks.base import EnvironmentParameters, Stat
 
 logger = logging.getLogger("unity_stub_env")
 
 ACADEMY_NAME = "AcademySingleton"
-UNITY_COMMUNICATION_VERSION = "1.5.0"
-UNITY_PACKAGE_VERSION = "3.0.0"
 STATUS_OK = 200
 STATUS_CLOSING = 400
 _CHANNEL_OPTIONS = [
@@ -136,7 +134,7 @@ class RpcCommunicator:
         self.address = f"localhost:{port}"
         self.port = port
         self.connect_timeout = float(connect_timeout)
-        self.spin_wait = float(spin_wait)  # s; see trainer/protocol/pacing.py
+        self.spin_wait = float(spin_wait)  # s; see protos/pacing.py
         self.transport = transport  # one of TRANSPORTS
         self.stop_requested = False
         self._channel = None
@@ -175,22 +173,22 @@ class RpcCommunicator:
     def initialize(self):
         """Send M1 and M2. Returns (init input from M1's answer, rl_input of M2's answer)."""
         academy = unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
-            name=ACADEMY_NAME, communication_version=UNITY_COMMUNICATION_VERSION,
+            name=ACADEMY_NAME, communication_version=COMMUNICATION_VERSION,
             package_version=UNITY_PACKAGE_VERSION, capabilities=all_true_capabilities(),  # Unity 3.0 reports all 7
         )
         first = self._exchange_raw(
             _wrap(unity_output_pb2.UnityOutputProto(rl_initialization_output=academy)).SerializeToString())
         init_input = first.unity_input.rl_initialization_input
         trainer_version = init_input.communication_version
-        if not communication_versions_compatible(UNITY_COMMUNICATION_VERSION, trainer_version):
+        if not communication_versions_compatible(COMMUNICATION_VERSION, trainer_version):
             self.close(send_closing=True)
             raise SessionEnd(
                 f"The trainer at {self.address} speaks communication API {trainer_version!r}, which is "
-                f"incompatible with this simulator's {UNITY_COMMUNICATION_VERSION}. Use a trainer for "
+                f"incompatible with this simulator's {COMMUNICATION_VERSION}. Use a trainer for "
                 "ML-Agents Release 22 (communication API 1.x).", 1)
-        if trainer_version.split(".")[:2] != UNITY_COMMUNICATION_VERSION.split(".")[:2]:
+        if trainer_version.split(".")[:2] != COMMUNICATION_VERSION.split(".")[:2]:
             logger.warning("The trainer's communication API %s differs from %s at the minor level; "
-                           "some features may not work.", trainer_version, UNITY_COMMUNICATION_VERSION)
+                           "some features may not work.", trainer_version, COMMUNICATION_VERSION)
         logger.info("Connected to trainer at %s (package version %s, communication version %s)",
                     self.address, init_input.package_version, trainer_version)
         second = self._exchange_raw(_wrap(None).SerializeToString())
@@ -273,20 +271,14 @@ def step_message_bytes(lists: list[tuple[str, bytes]], side_channel: bytes, brai
     holding ``brain_parameters`` when there are any. The same bytes protobuf writes for the
     message built field by field (tests/stub/test_stub_wire.py); the agent infos are copied,
     never parsed."""
-    parts = []
-    for key, data in lists:
-        name = key.encode()
-        entry = wire.len_prefix(1, len(name)) + name + wire.len_prefix(2, len(data)) + data
-        parts += [wire.len_prefix(2, len(entry)), entry]
+    parts = [wire.map_entry(2, key, data) for key, data in lists]
     if side_channel:
-        parts += [wire.len_prefix(3, len(side_channel)), side_channel]
-    rl_output = b"".join(parts)
-    output = wire.len_prefix(1, len(rl_output)) + rl_output
+        parts.append(wire.field(3, side_channel))
+    output = wire.field(1, b"".join(parts))
     if brain_parameters:
-        init = unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
-            brain_parameters=brain_parameters).SerializeToString()
-        output += wire.len_prefix(2, len(init)) + init
-    return HEADER_OK_FIELD + wire.len_prefix(2, len(output)) + output
+        output += wire.field(2, unity_rl_initialization_output_pb2.UnityRLInitializationOutputProto(
+            brain_parameters=brain_parameters).SerializeToString())
+    return wire.HEADER_OK_FIELD + wire.field(2, output)
 
 
 # Side channels -------------------------------------------------------------------------------

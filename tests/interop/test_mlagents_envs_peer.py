@@ -24,8 +24,13 @@ DOCUMENTED_SPECS = {
                                "name": "VectorSensor_size8"}],
         "action_spec": {"continuous_size": 2, "discrete_branches": []},
     }},
+    "dodge": {"Dodge?team=0": {
+        "observation_specs": [{"shape": [17], "dimension_property": [1], "observation_type": 0,
+                               "name": "VectorSensor_size17"}],
+        "action_spec": {"continuous_size": 9, "discrete_branches": []},
+    }},
 }
-AGENTS = {"basic": 1, "ball3d": 12}  # agents per area; one area by default
+AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14}  # agents per area; one area by default
 STEPS = 500
 
 
@@ -67,6 +72,14 @@ def test_unity_environment_runs_stub_task(task, run_peer, stub_executable, free_
         assert len(outcomes) == result["terminal_steps"]  # one stat per finished episode
         assert {value for value, _ in outcomes} <= {0.0, 1.0}
         assert {agg for _, agg in outcomes} == {0}  # AVERAGE
+    if task == "dodge":
+        # start pose: no crouch, torso and neck quaternions at identity (w, x, y, z)
+        np.testing.assert_allclose(first_obs[:, :9], np.tile([0, 1, 0, 0, 0, 1, 0, 0, 0], (14, 1)), atol=0.2)
+        # every throw ends within 0.4-1.4 s (20-70 decisions): 500 steps give >= 14 * 500 / 70 episodes
+        assert result["terminal_steps"] >= 14 * STEPS // 70
+        hits, passes = result["stats"]["Dodge/Hit"], result["stats"]["Dodge/Passed"]
+        assert len(hits) == len(passes) == result["terminal_steps"]
+        assert sum(value for value, _ in hits) + sum(value for value, _ in passes) >= result["terminal_steps"]
 
 
 def test_side_channels_reach_the_stub_and_back(run_peer, stub_executable, free_port, tmp_path, is_gone):

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 import torch
 
+from protos.types import (
+    ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType,
+)
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer, normalize_advantages
-from trainer.protocol.types import (
-    ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType,
-)
 
 PEER = Path(__file__).parent / "peer_scripts" / "ppo_reference_update.py"
 

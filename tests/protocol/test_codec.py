@@ -15,11 +15,8 @@ from protos.communicator_objects import (
     unity_message_pb2,
     unity_output_pb2,
 )
-from tests.protocol.conftest import agent_info, brain_params, png_bytes
-from trainer.errors import ProtocolError, UnityVersionError
-from trainer.protocol import codec
-from trainer.protocol.png import split_concatenated_pngs
-from trainer.protocol.types import (
+from protos.errors import ProtocolError
+from protos.types import (
     ActionSpec,
     ActionTuple,
     BehaviorSpec,
@@ -27,6 +24,12 @@ from trainer.protocol.types import (
     ObservationSpec,
     ObservationType,
 )
+from protos.versions import all_true_capabilities
+from tests.protocol import reference
+from tests.protocol.conftest import agent_info, brain_params, png_bytes
+from trainer.errors import UnityVersionError
+from trainer.protocol import codec
+from trainer.protocol.png import split_concatenated_pngs
 
 P = DimensionProperty
 
@@ -285,9 +288,15 @@ def test_uncompressed_visual_observation():
 
 
 # ------------------------------------------------------------------ trainer → Unity
+def _rl_input(payload: bytes):
+    message = unity_message_pb2.UnityMessageProto.FromString(payload)
+    assert message.header.status == 200
+    return message.unity_input.rl_input
+
+
 def test_hybrid_actions_are_encoded_field_by_field_and_byte_exact():
     actions = {"H?team=0": ActionTuple(np.array([[0.5, -1.0], [0.25, 0.0]], np.float32), np.array([[2, 0], [1, 1]], np.int32))}
-    rl_input = codec.encode_rl_input(actions, b"\x01\x02")
+    rl_input = _rl_input(codec.encode_answer(actions, b"\x01\x02"))
     assert rl_input.command == command_pb2.STEP and rl_input.side_channel == b"\x01\x02"
     first, second = rl_input.agent_actions["H?team=0"].value
     assert list(first.continuous_actions) == [0.5, -1.0]
@@ -308,20 +317,19 @@ def test_behaviors_without_rows_are_left_out_and_reset_has_no_actions():
         "C": ActionTuple(np.array([[0.5]], np.float32), np.zeros((1, 0), np.int32)),
         "Idle": ActionTuple(np.zeros((0, 1), np.float32), np.zeros((0, 0), np.int32)),
     }
-    step = codec.encode_rl_input(actions, b"")
+    step = _rl_input(codec.encode_answer(actions, b""))
     assert list(step.agent_actions) == ["C"]
     only = step.agent_actions["C"].value[0]
     assert list(only.continuous_actions) == [0.5] and list(only.discrete_actions) == []
     assert isinstance(only, agent_action_pb2.AgentActionProto)
-    reset = codec.encode_rl_input(actions, b"sc", command=codec.RESET)
+    reset_bytes = codec.encode_answer(actions, b"sc", command=codec.RESET)
+    reset = _rl_input(reset_bytes)
     assert reset.command == command_pb2.RESET and len(reset.agent_actions) == 0 and reset.side_channel == b"sc"
+    assert reset_bytes == reference.answer({}, b"sc", command_pb2.RESET)
 
 
-def _step_message_through_protos(actions, side_channel: bytes) -> bytes:
-    message = unity_message_pb2.UnityMessageProto()
-    message.header.status = 200
-    codec.fill_rl_input(message.unity_input.rl_input, actions, side_channel, codec.STEP)
-    return message.SerializeToString()
+def _as_pairs(actions):
+    return {name: (a.continuous, a.discrete) for name, a in actions.items()}
 
 
 def test_step_answer_for_basic_is_written_byte_for_byte():
@@ -333,7 +341,7 @@ def test_step_answer_for_basic_is_written_byte_for_byte():
     rl_input = b"\x0a" + bytes([len(entry)]) + entry
     unity_input = b"\x0a" + bytes([len(rl_input)]) + rl_input
     expected = b"\x0a\x03\x08\xc8\x01" + b"\x1a" + bytes([len(unity_input)]) + unity_input
-    assert codec.step_message_bytes(actions, b"") == expected == _step_message_through_protos(actions, b"")
+    assert codec.encode_answer(actions, b"") == expected == reference.answer(_as_pairs(actions))
 
 
 @pytest.mark.parametrize("agents", [1, 3, 7, 8, 20])
@@ -345,11 +353,7 @@ def test_step_answer_bytes_are_what_the_protobuf_objects_serialize(agents, conti
     cont[0, :1] = -0.0  # signed zeros and packed zeros are written like any other value
     disc = rng.integers(0, 130, (agents, branches)).astype(np.int32)  # 128+ : two-byte varints
     actions = {"A?team=0": ActionTuple(cont, disc)}
-    direct = codec.step_message_bytes(actions, side_channel)
-    if agents >= 8 and branches and disc.max() >= 128:  # the matrix encoder needs one-byte varints
-        assert direct is None
-        return
-    assert direct == _step_message_through_protos(actions, side_channel)
+    assert codec.encode_answer(actions, side_channel) == reference.answer(_as_pairs(actions), side_channel)
 
 
 def test_step_answer_with_several_behaviors_parses_to_the_same_message():
@@ -358,14 +362,19 @@ def test_step_answer_with_several_behaviors_parses_to_the_same_message():
         "Idle?team=0": ActionTuple(np.zeros((0, 2), np.float32), np.zeros((0, 0), np.int32)),
         "C?team=1": ActionTuple(np.array([[0.5, -0.25], [1.0, 0.0]], np.float32), np.zeros((2, 0), np.int32)),
     }
-    direct = unity_message_pb2.UnityMessageProto.FromString(codec.step_message_bytes(actions, b"sc"))
-    assert direct == unity_message_pb2.UnityMessageProto.FromString(_step_message_through_protos(actions, b"sc"))
+    direct = unity_message_pb2.UnityMessageProto.FromString(codec.encode_answer(actions, b"sc"))
+    assert direct == unity_message_pb2.UnityMessageProto.FromString(reference.answer(_as_pairs(actions), b"sc"))
     assert sorted(direct.unity_input.rl_input.agent_actions) == ["B?team=0", "C?team=1"]
 
 
-def test_negative_discrete_actions_are_left_to_the_protobuf_objects():
-    actions = {"A": ActionTuple(np.zeros((1, 0), np.float32), np.array([[-1]], np.int32))}
-    assert codec.step_message_bytes(actions, b"") is None
+@pytest.mark.parametrize("agents", [1, 8])
+def test_negative_discrete_actions_are_ten_byte_varints_as_protobuf_writes_them(agents):
+    disc = np.full((agents, 2), -1, np.int32)
+    disc[:, 1] = -(2**31)
+    actions = {"A": ActionTuple(np.zeros((agents, 0), np.float32), disc)}
+    written = codec.encode_answer(actions, b"")
+    assert written == reference.answer(_as_pairs(actions))
+    assert b"\xff" * 9 + b"\x01" in written  # -1 as the varint of 2**64 - 1
 
 
 # ------------------------------------------------------------------ version check
@@ -388,52 +397,62 @@ def test_communication_version_table(version, ok):
 
 
 def test_capabilities_all_true():
-    caps = codec.all_true_capabilities()
+    caps = all_true_capabilities()
     assert [getattr(caps, f.name) for f in caps.DESCRIPTOR.fields] == [True] * 7
 
 
-# ------------------------------------------------------------------ few agents: the plain-Python path
-def _both_small_paths(monkeypatch, infos, spec):
-    lst = output_with({"B": infos}, [brain_params("B", spec.action_spec.continuous_size,
-                                                    spec.action_spec.discrete_branches)]).rl_output.agentInfos["B"]
-    taken = []
-    real = codec._few_deciding_agents
-    monkeypatch.setattr(codec, "_few_deciding_agents", lambda *a: taken.append(real(*a)) or taken[-1])
-    few = codec.steps_from_agent_infos("B", lst.value, spec, lst)
-    monkeypatch.setattr(codec, "_FEW_AGENTS", 0)
-    general = codec.steps_from_agent_infos("B", lst.value, spec, lst)
-    monkeypatch.setattr(codec, "_FEW_AGENTS", 8)
-    return few, general, taken and taken[0] is not None
-
-
-def test_few_deciding_agents_decode_like_the_general_path(monkeypatch):
+# ------------------------------------------------------------------ a few agents, agent by agent
+def test_a_few_agents_decode_to_their_hand_written_values():
     spec = BehaviorSpec((ObservationSpec((3,), (P.NONE,), ObservationType.DEFAULT, "a"),
                          ObservationSpec((2,), (P.NONE,), ObservationType.DEFAULT, "b")), ActionSpec(1, (2, 3)))
     infos = [agent_info(7, obs=[[1, 2, 3], [4, 5]], reward=0.5, mask=[False, True, True, False, False]),
              agent_info(-3, obs=[[0.25, 0, -1], [9, 8]], reward=-1.5, group_id=4, group_reward=2.0),
              agent_info(2**31 - 1, obs=[[7, 7, 7], [6, 6]], mask=[True, True])]  # wrong width: nothing masked
-    few, general, taken = _both_small_paths(monkeypatch, infos, spec)
-    assert taken
-    for a, b in zip(few[0].obs + [few[0].reward, few[0].agent_id, few[0].group_id, few[0].group_reward] + few[0].action_mask,
-                    general[0].obs + [general[0].reward, general[0].agent_id, general[0].group_id, general[0].group_reward]
-                    + general[0].action_mask):
-        assert a.dtype == b.dtype and a.shape == b.shape
-        np.testing.assert_array_equal(a, b)
-    assert few[0].agent_id.tolist() == [7, -3, 2**31 - 1] and few[0].reward.tolist() == [0.5, -1.5, 0.0]
-    assert few[0].action_mask[0].tolist() == [[False, True], [False, False], [False, False]]
-    assert len(few[1]) == 0
+    decision, terminal = codec.steps_from_agent_infos("B", infos, spec)
+    assert decision.agent_id.tolist() == [7, -3, 2**31 - 1] and decision.reward.tolist() == [0.5, -1.5, 0.0]
+    assert decision.obs[0].tolist() == [[1, 2, 3], [0.25, 0, -1], [7, 7, 7]]
+    assert decision.obs[1].tolist() == [[4, 5], [9, 8], [6, 6]]
+    assert decision.group_id.tolist() == [0, 4, 0] and decision.group_reward.tolist() == [0.0, 2.0, 0.0]
+    assert decision.action_mask[0].tolist() == [[False, True], [False, False], [False, False]]
+    assert decision.action_mask[1].tolist() == [[True, False, False], [False] * 3, [False] * 3]
+    assert len(terminal) == 0
 
 
-@pytest.mark.parametrize("case", ["done", "nan_reward", "inf_obs", "short_obs"])
-def test_few_agents_step_aside_for_the_general_path(monkeypatch, case):
+@pytest.mark.parametrize("case", ["nan_reward", "inf_group_reward", "inf_obs", "short_obs"])
+def test_a_bad_agent_among_few_is_named(case):
     spec = BehaviorSpec((ObservationSpec((3,), (P.NONE,), ObservationType.DEFAULT, "a"),), ActionSpec(1, ()))
-    kwargs = {"done": {"done": True}, "nan_reward": {"reward": float("nan")},
+    kwargs = {"nan_reward": {"reward": float("nan")}, "inf_group_reward": {"group_reward": float("-inf")},
               "inf_obs": {"obs": [[1, float("inf"), 3]]}, "short_obs": {"obs": [[1, 2]]}}[case]
     kwargs.setdefault("obs", [[1, 2, 3]])
     infos = [agent_info(1, obs=[[0, 0, 0]]), agent_info(42, **kwargs)]
-    if case == "done":
-        few, general, taken = _both_small_paths(monkeypatch, infos, spec)
-        assert not taken and len(few[1]) == 1 and few[1].agent_id.tolist() == [42]
-        return
     with pytest.raises(ProtocolError, match="agent id 42"):
-        _both_small_paths(monkeypatch, infos, spec)
+        codec.steps_from_agent_infos("B", infos, spec)
+
+
+def test_no_agents_decode_to_empty_steps_of_the_spec_shapes():
+    spec = BehaviorSpec((ObservationSpec((3,), (P.NONE,), ObservationType.DEFAULT, "a"),), ActionSpec(0, (2,)))
+    decision, terminal = codec.steps_from_agent_infos("B", [], spec)
+    assert len(decision) == len(terminal) == 0
+    assert decision.obs[0].shape == (0, 3) and decision.action_mask[0].shape == (0, 2)
+
+
+@pytest.mark.parametrize("matrix_from", [1, 10**9])  # every count through the byte matrix, then the loop
+@pytest.mark.parametrize("agents", [1, 5, 8, 20])
+def test_both_action_writers_write_protobufs_bytes(monkeypatch, matrix_from, agents):
+    from protos import wire
+    from protos.communicator_objects import unity_rl_input_pb2
+
+    monkeypatch.setattr(wire, "MIN_MATRIX_ROWS", matrix_from)
+    rng = np.random.default_rng(agents)
+    for c, b in [(2, 0), (0, 3), (3, 2), (0, 0)]:
+        continuous = rng.normal(size=(agents, c)).astype(np.float32)
+        discrete = rng.integers(0, 127, size=(agents, b)).astype(np.int32)
+        if b:
+            discrete[0, 0] = 200 if matrix_from == 1 else -7  # a 2-byte varint takes the loop; so does a negative
+        expected = unity_rl_input_pb2.UnityRLInputProto.ListAgentActionProto()
+        for cont_row, disc_row in zip(continuous.tolist(), discrete.tolist()):
+            agent = expected.value.add()
+            agent.vector_actions_deprecated.extend(cont_row + [float(d) for d in disc_row])
+            agent.continuous_actions.extend(cont_row)
+            agent.discrete_actions.extend(disc_row)
+        assert codec.agent_actions_bytes(continuous, discrete) == expected.SerializeToString()

@@ -17,20 +17,20 @@ import grpc
 import numpy as np
 import pytest
 
-from trainer.errors import UnityCommunicatorStoppedError
-from trainer.protocol.server import UnityEndpoint
-from trainer.protocol.side_channels import (
+from protos.side_channels import (
     ENGINE_CONFIG_CHANNEL_ID,
     SideChannelRouter,
     encode_engine_config,
 )
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     ActionTuple,
     DimensionProperty,
     ObservationType,
     StatsAggregationMethod,
 )
+from trainer.errors import UnityCommunicatorStoppedError
+from trainer.protocol.server import UnityEndpoint
 
 GOLDEN = Path(__file__).parent / "golden"
 EXCHANGE_PATH = "/communicator_objects.UnityToExternalProto/Exchange"

@@ -9,10 +9,10 @@ import threading
 import grpc
 import pytest
 
+from protos import http2
 from protos.communicator_objects import unity_message_pb2
+from protos.errors import ProtocolError
 from tests.protocol.conftest import free_port, m1, m2
-from trainer.errors import ProtocolError
-from trainer.protocol import http2
 from trainer.protocol.server import EXCHANGE_PATH, UnityEndpoint
 
 pytestmark = pytest.mark.timeout(60)
@@ -147,8 +147,10 @@ def test_pings_are_acknowledged_and_settings_acked():
             received = sock.recv(65536)
         assert http2.frame(http2.SETTINGS, http2.ACK, 0) in received
         assert http2.frame(http2.PING, http2.ACK, 0, b"12345678") in received
-        # our own SETTINGS: a 2^31-1 stream window and 2^24-1 frames; then the connection window
-        assert received.startswith(http2.frame(http2.SETTINGS, 0, 0, struct.pack(">HIHI", 4, 2**31 - 1, 5, 2**24 - 1)))
+        # our own SETTINGS: no push, 16 calls at once, a 2^31-1 stream window, 1 MiB frames,
+        # 64 KiB of headers; then the connection window
+        assert received.startswith(http2.frame(http2.SETTINGS, 0, 0, struct.pack(
+            ">HIHIHIHIHI", 2, 0, 3, 16, 4, 2**31 - 1, 5, 2**20, 6, 2**16)))
     finally:
         transport.close(grace=0.2)
 
@@ -221,34 +223,16 @@ def test_caching_decoder_reuses_only_blocks_that_leave_the_table_unchanged():
     assert decoder.decode(again) == [(b"x-other", b"1")]
 
 
-def test_agent_actions_bytes_equal_the_one_message_at_a_time_encoding():
-    import numpy as np
-
-    from protos.communicator_objects import unity_rl_input_pb2
-    from trainer.protocol import codec
-
-    rng = np.random.default_rng(3)
-    for c, b in [(2, 0), (0, 3), (3, 2), (0, 0)]:
-        continuous = rng.normal(size=(5, c)).astype(np.float32)
-        discrete = rng.integers(0, 127, size=(5, b)).astype(np.int32)
-        fast = unity_rl_input_pb2.UnityRLInputProto.ListAgentActionProto.FromString(
-            codec.encode_agent_actions(continuous, discrete))
-        slow = unity_rl_input_pb2.UnityRLInputProto.ListAgentActionProto()
-        codec._fill_agent_actions(slow.value, continuous, discrete)
-        assert fast.SerializeToString() == slow.SerializeToString() and len(fast.value) == 5
-    # a discrete action that needs a 2-byte varint takes the message-by-message path
-    assert codec.encode_agent_actions(np.zeros((1, 0), np.float32), np.array([[200]], np.int32)) is None
-
-
 def test_endless_header_blocks_close_the_connection_instead_of_growing():
     transport = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, 1 << 20)
     transport.start()
     try:
         with socket.create_connection(("127.0.0.1", transport.port), timeout=5) as sock:
             chunk = http2.frame(http2.CONTINUATION, 0, 1, b"\x00" * 65536)
-            sock.sendall(http2.PREFACE + http2.frame(http2.HEADERS, 0, 1, b"\x00" * 65536))
+            sock.sendall(http2.PREFACE + http2.frame(http2.SETTINGS, 0, 0)
+                         + http2.frame(http2.HEADERS, 0, 1, b"\x00" * 16384))
             received = b""
-            for _ in range(20):  # 20 x 64 KiB > the 1 MiB limit
+            for _ in range(20):  # 20 x 64 KiB > the 64 KiB limit
                 try:
                     sock.sendall(chunk)
                 except OSError:

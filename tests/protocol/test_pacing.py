@@ -1,14 +1,10 @@
-"""PacedWait (trainer/protocol/pacing.py): when a waiter blocks and when it polls, by hand."""
+"""PacedWait (protos/pacing.py): when a waiter blocks and when it polls, by hand."""
 from __future__ import annotations
-
-import os
-import subprocess
-import sys
 
 import pytest
 
-from trainer.protocol import pacing
-from trainer.protocol.pacing import LEAD_S, PacedWait, spin_budget, stub_args, wait_paced
+from protos import pacing
+from protos.pacing import LEAD_S, PacedWait, wait_paced
 
 
 @pytest.fixture
@@ -91,39 +87,6 @@ def test_polling_arrivals_are_counted(clock):
 
 def test_negative_spin_is_off():
     assert PacedWait(-1.0).spin_s == 0.0
-
-
-@pytest.mark.parametrize("cpus, processes, expected", [
-    (2, 2, 0.001),  # trainer + one simulator on two CPUs: poll
-    (2, 3, 0.0),    # two simulators + trainer on two CPUs: polling would steal a CPU
-    (1, 2, 0.0),
-    (16, 9, 0.001),
-])
-def test_spin_budget_needs_a_cpu_per_process(monkeypatch, cpus, processes, expected):
-    monkeypatch.setattr(pacing, "usable_cpus", lambda: cpus)
-    assert spin_budget(processes, 0.001) == expected
-
-
-def test_spin_budget_follows_the_setting(monkeypatch):
-    monkeypatch.setattr(pacing, "usable_cpus", lambda: 4)
-    assert spin_budget(2, 0.0) == 0.0
-    assert spin_budget(2, 0.003) == pytest.approx(0.003)
-
-
-def test_stub_args_pass_only_what_differs_from_the_stubs_defaults():
-    assert stub_args(0.0) == [] and stub_args(0.0, "http2") == []
-    assert stub_args(0.0025, "grpcio") == ["--spin-wait-ms", "2.5", "--transport", "grpcio"]
-
-
-@pytest.mark.skipif(not hasattr(os, "sched_setaffinity") or (os.cpu_count() or 1) < 2,
-                    reason="needs affinity masks and two CPUs to tell the mask from the CPU count")
-def test_usable_cpus_is_the_affinity_mask():
-    """In a child process pinned to one CPU (as taskset or a Slurm allocation would), the count
-    is 1 though the machine has more."""
-    code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
-            "from trainer.protocol.pacing import usable_cpus; print(usable_cpus(), os.cpu_count())")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
-    assert out[0] == "1" and int(out[1]) >= 2
 
 
 # --- wait_paced: the waiting itself, on a real socket pair ----------------------------------

@@ -1,16 +1,17 @@
-"""Many AgentInfoProtos decoded from their bytes at once (trainer.protocol.records) must give
+"""Many AgentInfoProtos decoded from their bytes at once (protos.records) must give
 exactly what the agent-by-agent parse gives, and step aside whenever it cannot."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from protos import records, wire
 from protos.communicator_objects import agent_info_pb2, observation_pb2
+from protos.errors import ProtocolError
+from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from tests.protocol.conftest import agent_info, brain_params
 from tests.protocol.test_codec import output_with
-from trainer.errors import ProtocolError
-from trainer.protocol import codec, records, wire
-from trainer.protocol.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
+from trainer.protocol import codec
 
 
 @pytest.fixture(autouse=True)
@@ -29,9 +30,10 @@ def list_of(infos):
 
 
 def both_paths(infos, spec):
-    """(matrix path, per-agent path) through codec.steps_from_agent_infos."""
+    """(records path, protobuf path): codec.decode_agent_list on the list's bytes, and
+    codec.steps_from_agent_infos on its parsed agents."""
     lst = list_of(infos)
-    fast = codec.steps_from_agent_infos("B", lst.value, spec, lst)
+    fast = codec.decode_agent_list("B", lst.SerializeToString(), None, spec)
     slow = codec.steps_from_agent_infos("B", lst.value, spec)
     return fast, slow
 
@@ -128,7 +130,7 @@ def test_compressed_observations_and_wrong_shapes_step_aside():
     assert records.decode("B", list_of(bad).SerializeToString(), [(3,), (2,)], 5) is None
     lst = list_of(bad)
     with pytest.raises(ProtocolError, match="agent id 99"):
-        codec.steps_from_agent_infos("B", lst.value, SPEC, lst)
+        codec.decode_agent_list("B", lst.SerializeToString(), None, SPEC)
 
 
 def test_non_finite_values_are_still_rejected_on_the_matrix_path():
@@ -137,11 +139,11 @@ def test_non_finite_values_are_still_rejected_on_the_matrix_path():
     lst = list_of(infos)
     assert records.decode("B", lst.SerializeToString(), [(3,), (2,)], 5) is not None
     with pytest.raises(ProtocolError, match="agent id 8"):
-        codec.steps_from_agent_infos("B", lst.value, SPEC, lst)
+        codec.decode_agent_list("B", lst.SerializeToString(), None, SPEC)
     infos[7] = agent_info(8, obs=[[1, 2, 3], [4, 5]], reward=float("inf"))
     lst = list_of(infos)
     with pytest.raises(ProtocolError, match="reward for agent id 8"):
-        codec.steps_from_agent_infos("B", lst.value, SPEC, lst)
+        codec.decode_agent_list("B", lst.SerializeToString(), None, SPEC)
 
 
 def test_split_records_rejects_other_fields_and_truncation():
@@ -312,15 +314,6 @@ def _message(outputs: dict, params=(), side_channel: bytes = b"side") -> bytes:
     return message.SerializeToString()
 
 
-def _decode(payload: bytes, specs: dict, min_rows: int):
-    """(result, lists taken as bytes) the way UnityEndpoint decodes a request."""
-    from protos.communicator_objects import unity_message_pb2
-    split = records.split_agent_lists(payload, min_rows)
-    body, raw = split if split is not None else (payload, None)
-    request = unity_message_pb2.UnityMessageProto.FromString(body)
-    return codec.decode_rl_output(request.unity_output, specs, raw), raw
-
-
 def test_large_lists_are_taken_out_before_parsing_and_decoded_once(monkeypatch):
     big = varied_infos(70, 3)
     small = [agent_info(k, obs=[[1.0, 2.0]], reward=0.5) for k in range(1, 4)]
@@ -331,7 +324,11 @@ def test_large_lists_are_taken_out_before_parsing_and_decoded_once(monkeypatch):
     body, raw = split
     assert len(body) < len(payload) - len(raw["B"][0])
     monkeypatch.setattr(records, "MIN_ROWS", 64)
-    fast, _ = _decode(payload, {}, 64)  # first message: specs built from the raw list's first agent
+    from_bytes = []
+    real = codec.decode_agent_list
+    monkeypatch.setattr(codec, "decode_agent_list", lambda name, *a: from_bytes.append(name) or real(name, *a))
+    fast = codec.decode_message(payload, {}).result  # first message: specs from the raw list's first agent
+    assert from_bytes == ["B"]
     monkeypatch.setattr(records, "split_agent_lists", lambda *a: pytest.fail("unused here"))
     from protos.communicator_objects import unity_message_pb2
     slow = codec.decode_rl_output(unity_message_pb2.UnityMessageProto.FromString(payload).unity_output, {})
@@ -373,3 +370,34 @@ def test_a_garbled_large_list_is_a_protocol_error_not_a_crash(monkeypatch):
             __import__("protos.communicator_objects.unity_message_pb2", fromlist=["x"])
             .UnityMessageProto.FromString(body).unity_output,
             {"B": spec}, {"B": (bytes(garbled), records._cut(bytes(garbled)))})
+
+
+def test_messages_too_small_for_a_large_list_are_not_walked(monkeypatch):
+    """The codec looks for lists to cut out only in a message that can hold MIN_ROWS records of
+    the known behavior with the fewest observation floats (and always before any is known)."""
+    monkeypatch.setattr(records, "MIN_ROWS", 64)
+    spec = BehaviorSpec((vec(3), vec(2)), ActionSpec(2, (3, 2)))
+    assert codec._split_threshold({}) == 0
+    assert codec._split_threshold({"B": spec}) == 64 * (2 + 4 * 5)
+    looked = []
+    real = records.split_agent_lists
+    monkeypatch.setattr(records, "split_agent_lists", lambda *a: looked.append(len(a[0])) or real(*a))
+    infos = [agent_info(k, obs=[[1.0, 2.0, 3.0], [4.0, 5.0]]) for k in range(1, 80)]
+    small, large = (_message({"B": infos[:n]}, [brain_params("B", 2, (3, 2))]) for n in (20, 79))
+    assert len(small) < 64 * 22 <= len(large)
+    codec.decode_message(small, {"B": spec})
+    assert looked == []
+    first = codec.decode_message(small, {})  # nothing known yet: looked at (and nothing taken)
+    assert looked == [len(small)] and len(first.result.steps["B"][0]) == 20
+    result = codec.decode_message(large, {"B": spec}).result
+    assert looked[-1] == len(large) and result.steps["B"][0].agent_id.tolist() == list(range(1, 80))
+
+
+def test_a_message_that_is_not_one_and_a_closing_one():
+    with pytest.raises(codec.NotAMessageError, match="not a valid UnityMessageProto"):
+        codec.decode_message(b"\xff\xff\xff", {})
+    from protos.communicator_objects import unity_message_pb2
+    closing = unity_message_pb2.UnityMessageProto()
+    closing.header.status = 400
+    decoded = codec.decode_message(closing.SerializeToString(), {})
+    assert decoded.message.header.status == 400 and decoded.result is None

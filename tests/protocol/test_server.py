@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from protos.communicator_objects import command_pb2, unity_to_external_pb2_grpc
+from protos.types import ActionTuple
 from tests.protocol.conftest import (
     ScriptedUnity,
     agent_info,
@@ -28,7 +29,6 @@ from trainer.errors import (
     UnityVersionError,
 )
 from trainer.protocol.server import TRANSPORTS, UnityEndpoint
-from trainer.protocol.types import ActionTuple
 
 pytestmark = pytest.mark.timeout(60)
 

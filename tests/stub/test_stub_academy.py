@@ -143,3 +143,17 @@ def test_write_launcher_makes_a_unity_build_like_executable(tmp_path, capsys):
     assert text.startswith("#!/bin/sh\nexec ") and "-m unity_stub_env.cli --task basic,ball3d" in text
     assert text.rstrip().endswith('"$@"')  # passes on the flags the launching tool adds
     assert f"--env {tmp_path / 'StubBasicBall3D'}" in capsys.readouterr().out
+
+
+def test_written_launcher_puts_its_own_checkout_first_on_pythonpath(tmp_path, capsys):
+    """Launching tools (mlagents-learn, UnityEnvironment) drop PYTHONPATH: the player must still run
+    the unity_stub_env it was written from, not whichever one the venv has installed."""
+    import os
+
+    assert main(["--task", "dodge", "--write-launcher", str(tmp_path)]) == 0
+    capsys.readouterr()
+    exe = tmp_path / "StubDodge.x86_64"
+    assert f"exec env PYTHONPATH={REPO}\"${{PYTHONPATH:+:$PYTHONPATH}}\" " in exe.read_text()
+    env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"}
+    done = subprocess.run([str(exe), "--list"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and "dodge: behavior 'Dodge'" in done.stdout

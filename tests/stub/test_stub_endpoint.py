@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trainer.protocol import side_channels as sc
+from protos import side_channels as sc
+from protos.types import ActionTuple
 from trainer.protocol.server import UnityEndpoint
-from trainer.protocol.types import ActionTuple
 
 
 @pytest.fixture
@@ -43,7 +43,8 @@ def test_many_agents_are_decoded_from_bytes_once_and_equal_a_full_parse(endpoint
     parsing it (records.split_agent_lists) and decodes it from its bytes; every step equals
     what a plain parse of the same message gives, terminal infos included."""
     from protos.communicator_objects import unity_message_pb2
-    from trainer.protocol import codec, records
+    from protos import records
+    from trainer.protocol import codec
 
     payloads, taken = [], []
     real_split = records.split_agent_lists
@@ -80,7 +81,7 @@ def test_many_agents_are_decoded_from_bytes_once_and_equal_a_full_parse(endpoint
 
 def test_polling_on_both_ends_changes_nothing_but_the_waiting(launch, tmp_path):
     """The endpoint and the stub both poll for each other's answers (--spin-wait-ms,
-    trainer/protocol/pacing.py): the steps are the same as with plain blocking, the waits are
+    protos/pacing.py): the steps are the same as with plain blocking, the waits are
     timed, and the stub reports at exit how many answers polling found."""
     actions = [np.array([[a], [2 - a]], np.int32) for a in (2, 2, 1, 0, 2, 2, 2, 2, 0, 1) * 3]
     runs = []

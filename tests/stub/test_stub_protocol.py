@@ -6,6 +6,8 @@ import signal
 import numpy as np
 import pytest
 
+from protos import side_channels as sc
+from protos.types import StatsAggregationMethod
 from tests.stub.conftest import (
     QUIT,
     RESET,
@@ -14,8 +16,6 @@ from tests.stub.conftest import (
     init_answer,
     step_answer,
 )
-from trainer.protocol import side_channels as sc
-from trainer.protocol.types import StatsAggregationMethod
 
 BASIC = "Basic?team=0"
 BALL = "3DBall?team=0"

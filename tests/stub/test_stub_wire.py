@@ -7,9 +7,9 @@ from typing import Sequence
 import numpy as np
 import pytest
 
+from protos import wire
 from protos.communicator_objects import agent_info_pb2, observation_pb2, unity_rl_output_pb2
-from trainer.protocol import wire
-from trainer.protocol.types import ObservationSpec
+from protos.types import ObservationSpec
 from unity_stub_env.agents import encode_agent_infos
 from unity_stub_env.tasks import make_task
 
@@ -99,7 +99,7 @@ def test_rows_from_a_cached_layout_take_each_calls_values():
     assert wire.repeated_rows(1, [], 2) == b"\x0a\x00\x0a\x00" and wire.repeated_rows(1, [ids], 0) == b""
 
 
-@pytest.mark.parametrize("task_name,areas", [("basic", 3), ("ball3d", 1)])
+@pytest.mark.parametrize("task_name,areas", [("basic", 3), ("ball3d", 1), ("dodge", 1)])
 @pytest.mark.parametrize("done", [False, True])
 @pytest.mark.parametrize("small_batch", [0, 10_000], ids=["byte-matrix", "per-agent"])
 @pytest.mark.parametrize("mixed", [True, False], ids=["mixed-layouts", "one-layout"])

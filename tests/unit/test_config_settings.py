@@ -186,7 +186,7 @@ def test_configuration_yaml_round_trip(tmp_path):
     assert reloaded.as_dict() == options.as_dict()
 
 
-@pytest.mark.parametrize("name, behavior", [("basic", "Basic"), ("ball3d", "3DBall"), ("dodge_legacy", "Dodge")])
+@pytest.mark.parametrize("name, behavior", [("basic", "Basic"), ("ball3d", "3DBall"), ("dodge", "Dodge"), ("dodge_legacy", "Dodge")])
 def test_shipped_configs_load(name, behavior):
     options = load_run_options(os.path.join(REPO, "configs", f"{name}.yaml"))
     assert behavior in options.behaviors
@@ -210,3 +210,21 @@ def test_run_options_from_dict_without_file_has_no_config_path():
     options = run_options_from_dict({"behaviors": {"A": {"trainer_type": "ppo"}}})
     assert options.config_path is None
     assert options.behaviors["A"] == TrainerSettings()
+
+
+def test_dodge_configs_carry_the_thesis_values_and_agree(caplog):
+    """configs/dodge.yaml and the 0.x flat configs/dodge_legacy.yaml: seed 000's hyperparameters
+    (gamma 0.995, lambd 0.93, batch 2048, buffer 20480, 5 epochs, horizon 1000, beta 1e-2,
+    epsilon 0.3, normalize, 3 x 512, 5e6 steps); the legacy one loads with its warning."""
+    modern = load_run_options(os.path.join(REPO, "configs", "dodge.yaml")).behaviors["Dodge"]
+    with caplog.at_level("WARNING", logger="mlagents_like"):
+        legacy = load_run_options(os.path.join(REPO, "configs", "dodge_legacy.yaml")).behaviors["Dodge"]
+    assert "0.x" in caplog.text
+    for dodge in (modern, legacy):
+        hp, net = dodge.hyperparameters, dodge.network_settings
+        assert (hp.batch_size, hp.buffer_size, hp.num_epoch, hp.beta, hp.epsilon, hp.lambd, hp.learning_rate) == (
+            2048, 20480, 5, 1e-2, 0.3, 0.93, 3e-4)
+        assert (net.normalize, net.num_layers, net.hidden_units, net.memory) == (True, 3, 512, None)
+        assert dodge.reward_signals["extrinsic"].gamma == 0.995
+        assert (dodge.max_steps, dodge.time_horizon) == (5_000_000, 1000)
+    assert modern.hyperparameters == legacy.hyperparameters and modern.network_settings == legacy.network_settings

@@ -5,10 +5,10 @@ import textwrap
 
 import pytest
 
+from protos.types import DimensionProperty, ObservationSpec, ObservationType
 from trainer.config import load_run_options
 from trainer.config.support import check_supported, goal_conditioning_note, unsupported
 from trainer.errors import ConfigError
-from trainer.protocol.types import DimensionProperty, ObservationSpec, ObservationType
 
 
 def options(tmp_path, text: str):

@@ -7,13 +7,13 @@ import time
 
 import pytest
 
-from trainer.errors import ConfigError, EnvironmentNotFoundError
 from trainer.envs.launcher import (
     RestartPolicy,
     SimulatorProcess,
     build_launch_command,
     resolve_env_path,
 )
+from trainer.errors import ConfigError, EnvironmentNotFoundError
 
 
 def _make_file(path, executable=True):
@@ -55,7 +55,7 @@ def test_checking_a_stub_task_name_does_not_import_mujoco():
              "resolve_env_path('stub:ball3d'); import unity_stub_env; "
              "print(sorted(m for m in sys.modules if m.split('.')[0] in ('mujoco', 'unity_stub_env')))")
     loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
-    assert loaded.strip() == "['unity_stub_env', 'unity_stub_env.task_names']"
+    assert loaded.strip() == "['unity_stub_env', 'unity_stub_env.launcher', 'unity_stub_env.task_names']"
 
 
 @pytest.mark.parametrize("given", ["Game", "Game.x86_64", "Game.exe", "Game.app", "Game.x86"])
@@ -180,9 +180,9 @@ def test_stub_is_told_the_transport_and_a_unity_build_never_is():
 @pytest.mark.parametrize("cpus, expected", [(1, 0.0), (2, 0.0), (3, 0.001)])
 def test_pool_polls_only_with_a_cpu_for_the_trainer_and_each_simulator(monkeypatch, cpus, expected):
     from trainer.envs.pool import EnvPool, PoolSettings
-    from trainer.protocol import pacing
+    from trainer.envs import cpus as cpu_helpers
 
-    monkeypatch.setattr(pacing, "usable_cpus", lambda: cpus)
+    monkeypatch.setattr(cpu_helpers, "usable_cpus", lambda: cpus)
     settings = PoolSettings(env_path="stub:basic", env_args=(), base_port=5005, num_envs=2, num_areas=1,
                             seed=0, timeout_wait=5, bind="127.0.0.1", no_graphics=True,
                             no_graphics_monitor=False, log_folder=None)

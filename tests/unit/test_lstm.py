@@ -9,14 +9,7 @@ import onnxruntime as ort
 import pytest
 import torch
 
-from trainer.artifacts.onnx_export import export_to_bytes
-from trainer.ppo.buffer import Trajectory
-from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.losses import masked_mean, policy_loss
-from trainer.ppo.networks import Actor
-from trainer.ppo.policy import Policy
-from trainer.ppo.trainer import PPOTrainer
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     BehaviorSpec,
     DecisionSteps,
@@ -24,6 +17,13 @@ from trainer.protocol.types import (
     ObservationSpec,
     ObservationType,
 )
+from trainer.artifacts.onnx_export import export_to_bytes
+from trainer.ppo.buffer import Trajectory
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.losses import masked_mean, policy_loss
+from trainer.ppo.networks import Actor
+from trainer.ppo.policy import Policy
+from trainer.ppo.trainer import PPOTrainer
 from trainer.rollout import AgentTracker
 
 SPEC = BehaviorSpec((ObservationSpec((3,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "v"),),

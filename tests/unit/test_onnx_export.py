@@ -7,16 +7,16 @@ import onnxruntime as ort
 import pytest
 import torch
 
-from trainer.artifacts.onnx_export import export_policy
-from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.policy import Policy
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     BehaviorSpec,
     DimensionProperty,
     ObservationSpec,
     ObservationType,
 )
+from trainer.artifacts.onnx_export import export_policy
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.policy import Policy
 
 HYPER = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
 CONTINUOUS_OUTPUTS = ["continuous_actions", "continuous_action_output_shape", "deterministic_continuous_actions"]

@@ -3,16 +3,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from trainer.ppo.buffer import Trajectory
-from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.trainer import PPOTrainer
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     BehaviorSpec,
     DimensionProperty,
     ObservationSpec,
     ObservationType,
 )
+from trainer.ppo.buffer import Trajectory
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.trainer import PPOTrainer
 
 OBS = ObservationSpec((1,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "sign")
 HYPER = PPOHyperparams(batch_size=64, buffer_size=256, learning_rate=3e-3, beta=1e-3, num_epoch=3,

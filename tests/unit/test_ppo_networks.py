@@ -6,10 +6,10 @@ import math
 import pytest
 import torch
 
+from protos.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.errors import ConfigError
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.networks import Actor, Critic
-from trainer.protocol.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
 
 
 def vector_spec(size: int) -> ObservationSpec:

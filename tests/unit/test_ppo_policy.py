@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.policy import Policy
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     BehaviorSpec,
     DimensionProperty,
     ObservationSpec,
     ObservationType,
 )
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.policy import Policy
 
 HYPER = PPOHyperparams(hidden_units=16, num_layers=2)
 

@@ -8,18 +8,18 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
-from trainer.errors import ConfigError
-from trainer.ppo.buffer import Trajectory
-from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.trainer import PPOTrainer, normalize_advantages
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     BehaviorSpec,
     DimensionProperty,
     ObservationSpec,
     ObservationType,
 )
+from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
+from trainer.errors import ConfigError
+from trainer.ppo.buffer import Trajectory
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.ppo.trainer import PPOTrainer, normalize_advantages
 
 SPEC = BehaviorSpec(
     (ObservationSpec((3,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "vector"),),

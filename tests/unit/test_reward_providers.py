@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import torch
 
+from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from tests.unit.test_ppo_trainer import expected_advantages, make_trajectory
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.reward_providers import CuriosityProvider, Experience, RNDProvider
 from trainer.ppo.trainer import PPOTrainer
-from trainer.protocol.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 
 SPEC = BehaviorSpec(
     (ObservationSpec((3,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "vector"),),

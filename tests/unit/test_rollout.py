@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec, BehaviorSpec, DecisionSteps, DimensionProperty, ObservationSpec, ObservationType, TerminalSteps,
 )
 from trainer.rollout import AgentTracker, concat_masks

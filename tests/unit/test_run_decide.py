@@ -5,11 +5,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from trainer.artifacts.timers import TimerTree
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec, ActionTuple, BehaviorSpec, DecisionSteps, DimensionProperty, ObservationSpec, ObservationType,
     StepResult, TerminalSteps,
 )
+from trainer.artifacts.timers import TimerTree
 from trainer.run import RunState
 
 SPEC = BehaviorSpec(

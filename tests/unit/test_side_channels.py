@@ -7,9 +7,9 @@ import uuid
 import numpy as np
 import pytest
 
-from trainer.errors import ProtocolError
-from trainer.protocol import side_channels as sc
-from trainer.protocol.types import StatsAggregationMethod
+from protos import side_channels as sc
+from protos.errors import ProtocolError
+from protos.types import StatsAggregationMethod
 
 # --- the four observed wire examples of spec §4.2, byte for byte --------------------------------
 

@@ -22,7 +22,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from trainer.protocol.types import StatsAggregationMethod
+from protos.types import StatsAggregationMethod
 
 __all__ = [
     "StatsAggregationMethod",

@@ -21,12 +21,12 @@ import time
 from importlib import metadata as importlib_metadata
 from typing import Any, Callable
 
+from protos.versions import COMMUNICATION_VERSION
 from trainer.artifacts.atomic import atomic_write
 
 __all__ = ["TimerNode", "GaugeNode", "TimerTree", "TIMER_FORMAT_VERSION", "package_version"]
 
 TIMER_FORMAT_VERSION = "0.1.0"
-COMMUNICATION_PROTOCOL_VERSION = "1.5.0"
 PACKAGE_NAME = "mlagents-like"
 
 def package_version(dist_name: str = PACKAGE_NAME, module: str | None = None) -> str:
@@ -136,7 +136,7 @@ class TimerTree:
             "mlagents_version": ours,
             "mlagents_envs_version": ours,
             "mlagents_like_version": ours,
-            "communication_protocol_version": COMMUNICATION_PROTOCOL_VERSION,
+            "communication_protocol_version": COMMUNICATION_VERSION,
             "pytorch_version": package_version("torch", module="torch"),
             "numpy_version": package_version("numpy", module="numpy"),
         }

@@ -26,6 +26,7 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
+from protos.versions import PACKAGE_VERSION
 from trainer.artifacts.timers import package_version, write_json_atomic
 from trainer.errors import UserError
 
@@ -40,7 +41,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 STATS_FORMAT_VERSION = "0.3.0"
-MLAGENTS_VERSION = "1.1.0"
+MLAGENTS_VERSION = PACKAGE_VERSION  # the ML-Agents Python package we stand in for
 TRAINING_STATUS_FILE_NAME = "training_status.json"
 
 METADATA = "metadata"

@@ -18,7 +18,7 @@ MLAGENTS_LIKE_BLAS_THREADS     ``blas_threads``   None: numpy's BLAS gets 1 thre
                                                  OPENBLAS_NUM_THREADS / OMP_NUM_THREADS /
                                                  MKL_NUM_THREADS (trainer/cli.py)
 MLAGENTS_LIKE_SPIN_WAIT_MS     ``spin_wait_s``    1 ms: how long a waiting side polls past the expected
-                                                 answer; 0 always sleeps (trainer/protocol/pacing.py)
+                                                 answer; 0 always sleeps (protos/pacing.py)
 MLAGENTS_LIKE_TRANSPORT        ``transport``      http2: the gRPC transport of the trainer's server and
                                                  of the stubs it launches; or grpcio
 MLAGENTS_LIKE_NUMPY_UPDATE     ``numpy_update``   1: PPO's minibatch steps in numpy where the network

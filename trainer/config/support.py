@@ -8,9 +8,9 @@ simulator exists, naming each key and what to do.
 """
 from __future__ import annotations
 
+from protos.types import ObservationType
 from trainer.config.settings import RunOptions, TrainerSettings
 from trainer.errors import ConfigError
-from trainer.protocol.types import ObservationType
 
 # reward signals the PPO room computes (trainer/ppo/trainer.py checks the same list)
 SUPPORTED_REWARD_SIGNALS = ("extrinsic", "curiosity", "rnd")

@@ -16,7 +16,7 @@ from collections import deque
 from typing import IO
 
 from trainer.errors import ConfigError, EnvironmentNotFoundError
-from trainer.protocol.pacing import stub_args
+from unity_stub_env import spin_wait_args, transport_args
 
 logger = logging.getLogger("mlagents_like")
 
@@ -73,7 +73,7 @@ def resolve_env_path(env_path: str, platform: str | None = None) -> str:
     Raises EnvironmentNotFoundError naming every candidate tried.
     """
     if is_stub_env(env_path):
-        from unity_stub_env.task_names import TASK_NAMES
+        from unity_stub_env import TASK_NAMES
 
         given = env_path[len(STUB_PREFIX):].strip()
         unknown = [name for name in given.split(",") if name not in TASK_NAMES]  # TASK[,TASK...]
@@ -136,7 +136,7 @@ def build_launch_command(
         raise ConfigError(f"--num-areas must be at least 1, got {num_areas}.")
     if is_stub_env(env_path):
         command = [sys.executable, "-m", "unity_stub_env.cli", "--task", env_path[len(STUB_PREFIX):]]
-        command += stub_args(stub_spin_wait, stub_transport)
+        command += spin_wait_args(stub_spin_wait) + transport_args(stub_transport)
     else:
         command = [env_path]
     extra = list(env_args or [])

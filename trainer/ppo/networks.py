@@ -18,7 +18,7 @@ from trainer.ppo.distributions import mask_logits
 from trainer.ppo.encoders import VectorInput, make_visual_encoder
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.layers import KAIMING_NORMAL, XAVIER_UNIFORM, hidden_layers, linear_layer
-from trainer.protocol.types import ActionSpec, ObservationSpec
+from protos.types import ActionSpec, ObservationSpec
 
 MODEL_EXPORT_VERSION = 3
 
@@ -46,6 +46,8 @@ class LSTMMemory(nn.Module):
                         block.zero_()
                 if "bias" in name:
                     param.data[self.hidden_size:2 * self.hidden_size] += self.FORGET_BIAS
+        for name in ("weight_ih_l0", "weight_hh_l0"):  # stored input-major, as Linear kernels (layers.py)
+            setattr(self.lstm, name, nn.Parameter(getattr(self.lstm, name).detach().t().contiguous().t()))
 
     def forward(self, inputs: torch.Tensor, memories: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """inputs [n_seq, L, in], memories [1, n_seq, m] -> (outputs [n_seq, L, m/2], memories [1, n_seq, m])."""
@@ -156,7 +158,7 @@ class Actor(nn.Module):
         offsets = [0]
         for size in action_spec.discrete_branches:
             offsets.append(offsets[-1] + size)
-        self._mask_offsets = offsets
+        self.mask_offsets = offsets  # branch b's columns of the action mask: offsets[b]:offsets[b + 1]
 
     def heads(self, observations: Sequence[torch.Tensor], allowed: torch.Tensor | None
               ) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
@@ -181,7 +183,7 @@ class Actor(nn.Module):
         for index, branch in enumerate(self.discrete_branches):
             branch_logits = branch(encoding)
             if allowed is not None:
-                start, end = self._mask_offsets[index], self._mask_offsets[index + 1]
+                start, end = self.mask_offsets[index], self.mask_offsets[index + 1]
                 branch_logits = mask_logits(branch_logits, allowed[:, start:end])
             logits.append(branch_logits)
         return mu, logits

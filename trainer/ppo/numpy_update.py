@@ -3,11 +3,12 @@
 Why: a minibatch of ML-Agents-sized networks (64 samples, 2 x 128 units) is a few dozen tiny
 tensor ops, and in torch most of its ~3 ms go to per-op dispatch and the autograd engine
 (measured: backward alone 36 % of an update). The same arithmetic as numpy matmuls takes a
-fraction of that. The torch modules stay the single source of truth: their parameters are
-updated in place through shared memory, and their version counters are bumped afterwards so
-the numpy actor/critic copies, checkpoints and ONNX export all see the new weights.
-tests/unit/test_ppo_numpy_update.py checks losses, and weights after several steps, against
-the torch path (autograd + Adam), for continuous, discrete with masks and hybrid policies.
+fraction of that. The networks are those of networks.py, read through numpy_net.py: forward
+and backward run on numpy views of the torch parameters, and Adam (adam.py, the one optimiser)
+steps them in place, so torch, acting, checkpoints and ONNX export see every change. tests/unit/test_ppo_numpy_update.py checks the
+gradients against autograd on the same modules, and losses and weights after several steps
+against the torch path (autograd + the same Adam), for continuous, discrete with masks and
+hybrid policies.
 
 Math (what ``PPOTrainer._minibatch_loss`` + ``Adam.step`` compute; shapes n = batch):
     body:    z = clip((x - mean)/std, -5, 5) per input, concatenated; h_l = swish(h_{l-1} W_l^T + b_l)
@@ -17,6 +18,21 @@ Math (what ``PPOTrainer._minibatch_loss`` + ``Adam.step`` compute; shapes n = ba
     loss:    -mean(min(r A, clip(r, 1 +- eps) A)) + 0.5 mean_k mean (R_k - V_k)^2 - beta mean(entropy)
 The value term is (R - V)^2 because the trainer anchors the value clip at the returns (see
 PPOTrainer._minibatch_loss); with old values = returns the clipped branch never exceeds it.
+
+The critic's half in a forked child (``_CriticChild``): while the trainer updates, the simulators
+wait for its actions, so the second CPU is idle. The actor's and the critic's halves of the steps
+touch disjoint parameters, so the child steps the critic while the parent steps the actor, and
+the result is bit for bit that of one process. Measured again 2026-11-25 (ball3d-sized update:
+12000 experiences, 3 epochs of 64-row minibatches, 2 x 128 units; wall time, min of 5; 1 BLAS
+thread as the trainer runs; 2 vCPUs shared with other jobs): with the second CPU mostly idle
+(load ~1.3) 0.33 s in one process, 0.18 s with the child; with it busy (load ~2) 0.32-0.33 s
+against 0.30-0.37 s, no gain. It pays only with an idle second CPU, which is what the simulators
+leave during an update on a machine of our own (training runs measured 0.55 -> 0.32-0.40 s);
+with 2 BLAS threads per process the two processes oversubscribe the CPUs (0.66 s). The
+end-to-end effect still has to be measured on a quiet machine. A child that dies, or
+does not finish within max(FORK_TIMEOUT_MIN, FORK_TIMEOUT_FACTOR x the parent's own half),
+is killed and reaped; the parent then steps the critic itself (its critic is untouched until a
+child's result is copied in), says so once, and stops forking for the rest of the run.
 """
 from __future__ import annotations
 
@@ -24,18 +40,18 @@ import logging
 import math
 import mmap
 import os
+import select
 import signal
 import sys
 import threading
+import time
 
 import numpy as np
-import torch
-from torch import nn
 
-from trainer.ppo import fast_actor
-from trainer.ppo.adam import Adam
+from trainer.envs.cpus import usable_cpus
+from trainer.ppo import numpy_net
+from trainer.ppo.adam import Adam, Stretch
 from trainer.ppo.distributions import EPSILON, MASKED_LOGIT_OFFSET
-from trainer.protocol.pacing import usable_cpus
 
 logger = logging.getLogger(__name__)
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
@@ -44,8 +60,10 @@ _TWO_PI_E = 2 * math.pi * math.e
 
 # rows x critic parameters of an update below which forking costs more than it saves: the fork
 # of a ~250 MB trainer takes ~8 ms. Measured on 2 vCPUs: basic (24 minibatches x 32 rows, 461
-# critic parameters) 12 -> 20 ms per update; ball3d (562 x 64 rows, 17.7k) 0.55 -> 0.40 s.
+# critic parameters) 12 -> 20 ms per update; ball3d (562 x 64 rows, 17.7k) 0.33 -> 0.18 s (see above).
 FORK_MIN_WORK = 50e6
+FORK_TIMEOUT_MIN = 30.0  # seconds a child may take at least ...
+FORK_TIMEOUT_FACTOR = 5.0  # ... or this many times the parent's half of the same update
 
 
 def fork_pays_off(work: float) -> bool:
@@ -58,131 +76,75 @@ def fork_pays_off(work: float) -> bool:
 
 def supports(trainer) -> bool:
     return (trainer.device.type == "cpu" and isinstance(trainer.optimizer, Adam)
-            and fast_actor.supports(trainer.policy.actor) and fast_actor.supports(trainer.critic))
-
-
-def _normalized(network_body, obs: list[np.ndarray]) -> np.ndarray:
-    """The body's input (normalised, clipped, concatenated) for the whole buffer at once."""
-    return fast_actor.body_input(obs, fast_actor.body_normalizers(network_body))
-
-
-class _Body:
-    """Live numpy views of a NetworkBody's hidden Linear layers (shared memory with torch)."""
-
-    def __init__(self, network_body) -> None:
-        self.linears = [m for m in network_body.hidden if isinstance(m, nn.Linear)]
-        self.params = [(m.weight.detach().numpy(), m.bias.detach().numpy()) for m in self.linears]
-
-    # The elementwise steps below run in place on fresh arrays (one pass, no temporaries) and
-    # do the same float32 operations, in the same order, as the plain expressions they replace.
-    def forward(self, h: np.ndarray) -> tuple[np.ndarray, list]:
-        cache = []
-        for weight, bias in self.params:
-            a = h @ weight.T
-            a += bias
-            s = np.negative(a)  # s = 1 / (1 + exp(-a))
-            np.exp(s, out=s)
-            s += 1.0
-            np.reciprocal(s, out=s)
-            cache.append((h, a, s))
-            h = a * s
-        return h, cache
-
-    def backward(self, grad_h: np.ndarray, cache: list, grads: dict) -> None:
-        last = len(cache) - 1
-        for index, ((weight, _), linear, (h_in, a, s)) in enumerate(
-                zip(reversed(self.params), reversed(self.linears), reversed(cache))):
-            grad_a = a * s  # grad_h * (s + a * s * (1 - s))
-            grad_a *= 1.0 - s
-            grad_a += s
-            grad_a *= grad_h
-            grads[id(linear.weight)] = grad_a.T @ h_in
-            grads[id(linear.bias)] = np.add.reduce(grad_a, axis=0)
-            if index < last:  # the first layer's input (the observations) needs no gradient
-                grad_h = grad_a @ weight
+            and numpy_net.supports(trainer.policy.actor) and numpy_net.supports(trainer.critic))
 
 
 class NumpyPPO:
-    """Minibatch steps for one PPOTrainer; ``prepare`` once per update, then ``run``, ``finish``
-    at the end (bumps the torch version counters).
+    """Minibatch steps for one PPOTrainer (one instance for its lifetime): ``prepare`` once
+    per update, then ``run``.
 
     The actor and the critic are separate networks here (a shared body keeps the torch path,
     see ``supports``), so their halves of a minibatch step never touch each other's arrays:
     the policy and entropy terms reach only the actor's parameters, the value term only the
     critic's, and Adam is elementwise. ``run`` therefore steps the actor through every
     minibatch and then the critic (the same arithmetic as alternating them), and when it pays
-    off, the critic's half runs at the same time in a forked child process (``_CriticChild``)
-    on the CPU the simulator leaves idle while the trainer updates. Weights, moments and
-    statistics are bit-for-bit those of the sequential steps.
+    off, the critic's half runs at the same time in a forked child process (``_CriticChild``).
+    Weights, moments and statistics are bit-for-bit those of the sequential steps.
     """
 
     ACTOR_KEYS = ("continuous_actions", "discrete_actions", "allowed", "advantages", "log_probs")
 
-    def __init__(self, trainer) -> None:
-        actor, critic = trainer.policy.actor, trainer.critic
-        self.actor, self.critic = actor, critic
-        self.actor_body, self.critic_body = _Body(actor.network_body), _Body(critic.network_body)
-        self.mu = (actor.mu.weight.detach().numpy(), actor.mu.bias.detach().numpy()) if actor.mu is not None else None
-        self.log_sigma = actor.log_sigma.detach().numpy() if actor.mu is not None else None
-        self.branches = [(b.weight.detach().numpy(), b.bias.detach().numpy()) for b in actor.discrete_branches]
-        self.offsets = list(actor._mask_offsets)
-        self.heads = {name: (h.weight.detach().numpy(), h.bias.detach().numpy())
-                      for name, h in critic.value_heads.items()}
-        optimizer: Adam = trainer.optimizer
-        self.optimizer = optimizer
-        # Adam's moments as two flat vectors for the update (written back by ``finish``); the
-        # optimizer holds the actor's parameters, then the critic's (PPOTrainer builds it so)
-        arrays = [p.detach().numpy() for p in optimizer.params]
-        sizes = [a.size for a in arrays]
-        bounds = list(zip(np.cumsum([0] + sizes[:-1]).tolist(), np.cumsum(sizes).tolist()))
-        self.bounds = bounds
-        self.exp_avg = np.concatenate([t.numpy().reshape(-1) for t in optimizer.exp_avg]).astype(np.float32)
-        self.exp_avg_sq = np.concatenate([t.numpy().reshape(-1) for t in optimizer.exp_avg_sq]).astype(np.float32)
-        actor_ids = {id(p) for p in actor.parameters()}
-        split = sum(id(p) in actor_ids for p in optimizer.params)
-        if any(id(p) not in actor_ids for p in optimizer.params[:split]):
-            raise ValueError("the optimizer must hold the actor's parameters before the critic's")
-        self._adam_parts = {
-            half: _AdamPart(optimizer.params[lo:hi], arrays[lo:hi], bounds[lo:hi], self.exp_avg, self.exp_avg_sq)
-            for half, (lo, hi) in (("actor", (0, split)), ("critic", (split, len(arrays))))
-        }
+    def __init__(self, actor: numpy_net.NumpyActor, critic: numpy_net.NumpyCritic, optimizer: Adam) -> None:
+        self.actor, self.critic, self.optimizer = actor, critic, optimizer
+        # the optimizer holds the actor's parameters, then the critic's (PPOTrainer builds it so)
+        self.actor_part: Stretch = optimizer.stretch(p for p in actor.module.parameters() if p.requires_grad)
+        self.critic_part: Stretch = optimizer.stretch(p for p in critic.module.parameters() if p.requires_grad)
+        self.fork_failed = False  # a child failed once: this trainer steps its critic itself
 
     def prepare(self, obs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """Normalised inputs of the whole buffer for the actor and the critic (their statistics
         do not change during an update)."""
-        return _normalized(self.actor.network_body, obs), _normalized(self.critic.network_body, obs)
+        return self.actor.body.input(obs), self.critic.body.input(obs)
 
     # ------------------------------------------------------------------ a whole update
     def run(self, data: dict[str, np.ndarray], actor_in: np.ndarray, critic_in: np.ndarray,
             orders: list[np.ndarray], learning_rate: float, beta: float, epsilon: float,
             parallel: bool | None = None) -> list[dict[str, float]]:
-        """One ``step`` per minibatch (row indices ``orders``); ``parallel``: the critic's
-        half in a forked child process (``_CriticChild``); None: when ``fork_pays_off``.
-        Returns each minibatch's statistics."""
+        """One step per minibatch (row indices ``orders``) at ``learning_rate``; ``parallel``:
+        the critic's half in a forked child process; None: when ``fork_pays_off``. Returns each
+        minibatch's statistics."""
         if parallel is None:
-            parallel = fork_pays_off(sum(map(len, orders)) * self._adam_parts["critic"].exp_avg.size)
+            parallel = not self.fork_failed and fork_pays_off(sum(map(len, orders)) * self.critic_part.exp_avg.size)
+        self.optimizer.param_groups[0]["lr"] = learning_rate
         first_t = self.optimizer.step_count + 1
         actor_keys = [k for k in self.ACTOR_KEYS if k in data]
-        critic_keys = [f"returns:{name}" for name in self.heads]
+        critic_keys = [f"returns:{name}" for name in self.critic.heads]
 
         def actor_half(k: int, index: np.ndarray) -> tuple[float, float]:
             batch = {key: data[key][index] for key in actor_keys}
-            return self.actor_step(batch, actor_in[index], learning_rate, beta, epsilon, first_t + k)
+            return self.actor_step(batch, actor_in[index], beta, epsilon, first_t + k)
 
         def critic_half(k: int, index: np.ndarray) -> float:
             batch = {key: data[key][index] for key in critic_keys}
-            return self.critic_step(batch, critic_in[index], learning_rate, first_t + k)
+            return self.critic_step(batch, critic_in[index], first_t + k)
 
         # the halves are independent: all actor steps, then all critic steps, give the same
         # arithmetic as alternating them; ``parallel`` runs the critic's in a child process
-        child = _CriticChild.start(self._adam_parts["critic"], critic_half, orders) if parallel else None
+        started = time.monotonic()
+        child = _CriticChild.start(self.critic_part, critic_half, orders) if parallel else None
         try:
             actor = [actor_half(k, index) for k, index in enumerate(orders)]
         except BaseException:
             if child is not None:
                 child.abandon()
             raise
-        values = child.collect() if child is not None else None
+        values = None
+        if child is not None:
+            values, failure = child.collect(max(FORK_TIMEOUT_MIN, FORK_TIMEOUT_FACTOR * (time.monotonic() - started)))
+            if failure is not None:
+                self.fork_failed = True
+                logger.warning("The critic's update in a child process failed (%s); the trainer steps "
+                               "the critic itself from now on.", failure)
         if values is None:  # sequential, or the child failed (the critic here is untouched)
             values = [critic_half(k, index) for k, index in enumerate(orders)]
         self.optimizer.step_count = first_t - 1 + len(orders)
@@ -190,28 +152,38 @@ class NumpyPPO:
                 for (policy_term, entropy), value_term in zip(actor, values)]
 
     # ------------------------------------------------------------------ one minibatch
-    def actor_step(self, batch: dict[str, np.ndarray], actor_in: np.ndarray, learning_rate: float,
-                   beta: float, epsilon: float, t: int) -> tuple[float, float]:
-        """The policy and entropy terms' gradients and Adam step (number ``t``) for the actor.
-        Returns (policy term, mean entropy)."""
+    def actor_step(self, batch: dict[str, np.ndarray], actor_in: np.ndarray, beta: float, epsilon: float,
+                   t: int) -> tuple[float, float]:
+        """The actor's Adam step number ``t`` on one minibatch. Returns (policy term, mean entropy)."""
+        grads, policy_term, entropy = self.actor_gradients(batch, actor_in, beta, epsilon)
+        self.actor_part.step([grads[id(p)] for p in self.actor_part.params], t)
+        return policy_term, entropy
+
+    def actor_gradients(self, batch: dict[str, np.ndarray], actor_in: np.ndarray, beta: float, epsilon: float
+                        ) -> tuple[dict[int, np.ndarray], float, float]:
+        """The policy and entropy terms' gradients for every actor parameter (keyed by id of the
+        torch parameter), the policy term and the mean entropy."""
         grads: dict[int, np.ndarray] = {}
         n = len(actor_in)
-        h, actor_cache = self.actor_body.forward(actor_in)
+        body, actor = self.actor.body, self.actor.module
+        actor_cache: list = []
+        h = body.forward(actor_in, actor_cache)
         logp_parts, ent = [], np.zeros(n, dtype=np.float32)
         back = []  # per output column group: what the backward pass needs
-        if self.mu is not None:
-            w_mu, b_mu = self.mu
-            mu = h @ w_mu.T + b_mu
-            sigma = np.exp(self.log_sigma)  # [1, c]
+        if self.actor.mu is not None:
+            w_mu, b_mu = self.actor.mu  # W^T, b
+            mu = h @ w_mu + b_mu
+            sigma = np.exp(self.actor.log_sigma)  # [1, c]
             denom = 2 * sigma ** 2 + EPSILON
             diff = batch["continuous_actions"] - mu
             logp_parts.append(-(diff ** 2) / denom - np.log(sigma + EPSILON) - _LOG_SQRT_2PI)
             ent = ent + np.mean(0.5 * np.log(_TWO_PI_E * sigma ** 2 + EPSILON))
             back.append(("gaussian", diff, sigma, denom))
         allowed = batch.get("allowed")
-        for index, (weight, bias) in enumerate(self.branches):
-            logits = h @ weight.T + bias
-            start, end = self.offsets[index], self.offsets[index + 1]
+        offsets = self.actor.offsets
+        for index, (weight, bias) in enumerate(self.actor.branches):
+            logits = h @ weight + bias
+            start, end = offsets[index], offsets[index + 1]
             a = allowed[:, start:end] if allowed is not None else None
             if a is not None:
                 logits = logits * a - MASKED_LOGIT_OFFSET * (1.0 - a)
@@ -244,11 +216,11 @@ class NumpyPPO:
                 grad_ls = np.sum(g * (diff ** 2 * 4.0 * sigma ** 2 / denom ** 2 - sigma / (sigma + EPSILON)),
                                  axis=0, keepdims=True)
                 grad_ls += -beta / c * (_TWO_PI_E * sigma ** 2 / (_TWO_PI_E * sigma ** 2 + EPSILON))
-                w_mu, _ = self.mu
-                grads[id(self.actor.mu.weight)] = grad_mu.T @ h
-                grads[id(self.actor.mu.bias)] = grad_mu.sum(axis=0)
-                grads[id(self.actor.log_sigma)] = grad_ls
-                grad_h += grad_mu @ w_mu
+                w_mu, _ = self.actor.mu
+                grads[id(actor.mu.weight)] = (h.T @ grad_mu).T  # W^T contiguous, as stored
+                grads[id(actor.mu.bias)] = grad_mu.sum(axis=0)
+                grads[id(actor.log_sigma)] = grad_ls
+                grad_h += grad_mu @ w_mu.T
             else:
                 _, index, probs, chosen, action, log_p, a = item
                 g = grad_logp[:, column]
@@ -262,119 +234,81 @@ class NumpyPPO:
                 grad_logits += (-beta / n) * grad_ent
                 if a is not None:
                     grad_logits = grad_logits * a
-                weight, _ = self.branches[index]
-                branch = self.actor.discrete_branches[index]
-                grads[id(branch.weight)] = grad_logits.T @ h
+                weight, _ = self.actor.branches[index]
+                branch = actor.discrete_branches[index]
+                grads[id(branch.weight)] = (h.T @ grad_logits).T
                 grads[id(branch.bias)] = grad_logits.sum(axis=0)
-                grad_h += grad_logits @ weight
-        self.actor_body.backward(grad_h, actor_cache, grads)
-        self._adam_parts["actor"].step(grads, learning_rate, t, self.optimizer.param_groups[0])
-        return float(policy_term), float(np.mean(ent))
+                grad_h += grad_logits @ weight.T
+        body.backward(grad_h, actor_cache, grads)
+        return grads, float(policy_term), float(np.mean(ent))
 
-    def critic_step(self, batch: dict[str, np.ndarray], critic_in: np.ndarray, learning_rate: float,
-                    t: int) -> float:
-        """The value term's gradients and Adam step (number ``t``) for the critic. Returns the
-        value term."""
+    def critic_step(self, batch: dict[str, np.ndarray], critic_in: np.ndarray, t: int) -> float:
+        """The critic's Adam step number ``t`` on one minibatch. Returns the value term."""
+        grads, value_term = self.critic_gradients(batch, critic_in)
+        self.critic_part.step([grads[id(p)] for p in self.critic_part.params], t)
+        return value_term
+
+    def critic_gradients(self, batch: dict[str, np.ndarray], critic_in: np.ndarray
+                         ) -> tuple[dict[int, np.ndarray], float]:
+        """0.5 x the value term's gradients for every critic parameter (keyed by id of the torch
+        parameter), and the value term."""
         grads: dict[int, np.ndarray] = {}
         n = len(critic_in)
-        hc, critic_cache = self.critic_body.forward(critic_in)
-        values = {name: (hc @ w.T + b)[:, 0] for name, (w, b) in self.heads.items()}
+        body, heads = self.critic.body, self.critic.heads
+        cache: list = []
+        hc = body.forward(critic_in, cache)
+        values = {name: (hc @ w + b)[:, 0] for name, (w, b) in heads.items()}
         errors = {name: values[name] - batch[f"returns:{name}"] for name in values}
         value_term = np.mean([np.mean(e ** 2) for e in errors.values()])
         # ---- value term -> critic
         grad_hc = np.zeros_like(hc)
         scale = 0.5 * 2.0 / (n * len(errors))
         for name, error in errors.items():
-            w, _ = self.heads[name]
+            w, _ = heads[name]
             g = (scale * error)[:, None].astype(np.float32)
-            head = self.critic.value_heads[name]
-            grads[id(head.weight)] = g.T @ hc
+            head = self.critic.module.value_heads[name]
+            grads[id(head.weight)] = (hc.T @ g).T
             grads[id(head.bias)] = g.sum(axis=0)
-            grad_hc += g @ w
-        self.critic_body.backward(grad_hc, critic_cache, grads)
-        self._adam_parts["critic"].step(grads, learning_rate, t, self.optimizer.param_groups[0])
-        return float(value_term)
-
-    def finish(self) -> None:
-        """Write Adam's moments back and tell torch the tensors changed (numpy writes do not
-        bump version counters)."""
-        optimizer = self.optimizer
-        with torch.no_grad():
-            for index, (start, end) in enumerate(self.bounds):
-                shape = optimizer.exp_avg[index].shape
-                optimizer.exp_avg[index].copy_(torch.from_numpy(self.exp_avg[start:end].reshape(shape)))
-                optimizer.exp_avg_sq[index].copy_(torch.from_numpy(self.exp_avg_sq[start:end].reshape(shape)))
-            for tensor in optimizer.params:
-                tensor.add_(0.0)
+            grad_hc += g @ w.T
+        body.backward(grad_hc, cache, grads)
+        return grads, float(value_term)
 
 
 def _stats(policy_term: float, value_term: float, entropy: float) -> dict[str, float]:
     return {"Losses/Policy Loss": abs(policy_term), "Losses/Value Loss": value_term, "Policy/Entropy": entropy}
 
 
-class _AdamPart:
-    """Adam.step's arithmetic for some of the optimizer's parameters (one network's), on their
-    stretch of the flat moment vectors. Elementwise, so stepping the parts one by one gives
-    what one step over all parameters gives."""
-
-    def __init__(self, params: list, arrays: list[np.ndarray], bounds: list[tuple[int, int]],
-                 exp_avg: np.ndarray, exp_avg_sq: np.ndarray) -> None:
-        self.params, self.arrays = params, arrays
-        start, end = (bounds[0][0], bounds[-1][1]) if bounds else (0, 0)
-        self.bounds = [(lo - start, hi - start) for lo, hi in bounds]
-        self.exp_avg, self.exp_avg_sq = exp_avg[start:end], exp_avg_sq[start:end]  # views
-        self.flat_grad = np.empty_like(self.exp_avg)
-        self._scratch = np.empty_like(self.exp_avg)  # the one temporary
-
-    def step(self, grads: dict[int, np.ndarray], learning_rate: float, t: int, group: dict) -> None:
-        (beta1, beta2), eps = group["betas"], group["eps"]
-        g = self.flat_grad
-        for param, (start, end) in zip(self.params, self.bounds):
-            g[start:end] = grads[id(param)].reshape(-1)
-        m, v = self.exp_avg, self.exp_avg_sq
-        step = np.subtract(g, m, out=self._scratch)  # m += (1 - beta1) * (g - m)
-        step *= 1 - beta1
-        m += step
-        v *= beta2
-        np.multiply(g, 1 - beta2, out=step)  # v += (1 - beta2) * g * g
-        step *= g
-        v += step
-        update = np.sqrt(v, out=step)  # m / (sqrt(v) / sqrt(1 - beta2^t) + eps)
-        update /= math.sqrt(1 - beta2 ** t)
-        update += eps
-        np.divide(m, update, out=update)
-        update *= learning_rate / (1 - beta1 ** t)
-        for array, (start, end) in zip(self.arrays, self.bounds):
-            array -= update[start:end].reshape(array.shape)
-
-
 class _CriticChild:
     """The critic's half of an update in a forked child process, its result copied back.
 
     The child shares the parent's memory copy-on-write: the buffer, the critic's weights and
-    Adam moments as they were at the fork. It runs every critic step, then writes the
-    critic's parameters, its stretch of the moments and the value terms into an anonymous
-    shared mapping and exits (``os._exit``: no cleanup, no atexit, nothing flushed). The
-    parent's critic is untouched until ``collect`` copies the result in, so a child that fails
-    or is killed costs only time: ``collect`` returns None and the parent steps the critic
-    itself.
+    Adam moments as they were at the fork. It runs every critic step, writes the critic's
+    parameters, its stretch of the moments and the value terms into an anonymous shared
+    mapping and exits (``os._exit``: no cleanup, no atexit, nothing flushed), which closes its
+    end of a pipe: the parent waits for that end-of-file with a timeout. The parent's critic is
+    untouched until ``collect`` copies the result in, so a child that fails, hangs or is killed
+    costs only time: ``collect`` reports the failure and the parent steps the critic itself.
     """
 
-    def __init__(self, pid: int, shared: mmap.mmap, arrays: list[np.ndarray], count: int) -> None:
-        self.pid, self.shared, self.arrays, self.count = pid, shared, arrays, count
+    def __init__(self, pid: int, shared: mmap.mmap, arrays: list[np.ndarray], count: int, done: int) -> None:
+        self.pid, self.shared, self.arrays, self.count, self.done = pid, shared, arrays, count, done
 
     @classmethod
-    def start(cls, part: "_AdamPart", critic_half, orders: list) -> "_CriticChild | None":
+    def start(cls, part: Stretch, critic_half, orders: list) -> "_CriticChild | None":
         arrays = [*part.arrays, part.exp_avg, part.exp_avg_sq]
         shared = mmap.mmap(-1, sum(a.nbytes for a in arrays) + 8 * len(orders))
+        done, child_end = os.pipe()
         try:
             pid = os.fork()
         except OSError:
+            for fd in (done, child_end):
+                os.close(fd)
             shared.close()
             return None
         if pid == 0:  # the child: never returns
             code = 1
             try:
+                os.close(done)
                 signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
                 values = np.array([critic_half(k, index) for k, index in enumerate(orders)], dtype=np.float64)
                 out, offset = memoryview(shared), 0
@@ -384,34 +318,47 @@ class _CriticChild:
                 out.release()
                 code = 0
             finally:
-                os._exit(code)
-        return cls(pid, shared, arrays, len(orders))
+                os._exit(code)  # closes child_end: the parent's ``done`` reads end-of-file
+        os.close(child_end)
+        return cls(pid, shared, arrays, len(orders), done)
 
-    def collect(self) -> list[float] | None:
-        """Wait for the child; copy its critic in and return its value terms (None if it failed)."""
+    def collect(self, timeout: float) -> tuple[list[float] | None, str | None]:
+        """Wait up to ``timeout`` seconds for the child; copy its critic in and return (its
+        value terms, None), or (None, what went wrong) after killing and reaping it."""
         try:
+            finished, _, _ = select.select([self.done], [], [], timeout)
+            if not finished:
+                self._kill()
+                return None, f"no result after {timeout:.1f} s"
             try:
                 _, status = os.waitpid(self.pid, 0)
             except OSError as error:  # e.g. reaped by someone else: its result cannot be trusted
-                status = f"unknown: {error}"
+                return None, f"wait failed: {error}"
             if status != 0:
-                logger.warning("The critic's update in a child process failed (wait status %s); "
-                               "the trainer steps the critic itself.", status)
-                return None
+                return None, f"wait status {status}"
             offset = 0
             for array in self.arrays:
                 np.copyto(array, np.frombuffer(self.shared, dtype=array.dtype, count=array.size,
                                                offset=offset).reshape(array.shape))
                 offset += array.nbytes
-            return np.frombuffer(self.shared, dtype=np.float64, count=self.count, offset=offset).tolist()
+            return np.frombuffer(self.shared, dtype=np.float64, count=self.count, offset=offset).tolist(), None
         finally:
-            self.shared.close()
+            self._close()
 
     def abandon(self) -> None:
         """The parent gave up on this update: stop the child and reap it."""
+        self._kill()
+        self._close()
+
+    def _kill(self) -> None:
         try:
             os.kill(self.pid, signal.SIGKILL)
             os.waitpid(self.pid, 0)
         except OSError:
             pass
+
+    def _close(self) -> None:
+        if self.done >= 0:
+            os.close(self.done)
+            self.done = -1
         self.shared.close()

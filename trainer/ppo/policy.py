@@ -12,7 +12,7 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 
-from trainer.ppo import fast_actor
+from trainer.ppo import numpy_net
 from trainer.ppo.distributions import (
     EPSILON,
     categorical_entropy,
@@ -23,7 +23,7 @@ from trainer.ppo.distributions import (
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.losses import combined_entropy
 from trainer.ppo.networks import Actor
-from trainer.protocol.types import ActionTuple, BehaviorSpec
+from protos.types import ActionTuple, BehaviorSpec
 
 CONTINUOUS_CLIP = 3.0
 _HALF_LOG_2PI = 0.5 * np.log(2 * np.pi)  # a float64 scalar: the Gaussian terms in float64, as before
@@ -80,11 +80,15 @@ class Policy:
             self.actor = Actor(behavior_spec.observation_specs, self.action_spec, hyperparams).to(self.device)
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(seed + 1)
-        # vector-only actors on the CPU decide in numpy (see fast_actor for why)
-        use_numpy = self.device.type == "cpu" and fast_actor.supports(self.actor, recurrent=True)
+        # vector-only actors on the CPU decide in numpy (see numpy_net for why)
+        use_numpy = self.device.type == "cpu" and numpy_net.supports(self.actor, recurrent=True)
         self.memory_size = hyperparams.memory_size  # > 0: act takes and returns each agent's memory
-        self._numpy_actor = fast_actor.NumpyActor(self.actor) if use_numpy else None
+        self._numpy_actor = numpy_net.NumpyActor(self.actor) if use_numpy else None
 
+    @property
+    def numpy_actor(self) -> numpy_net.NumpyActor | None:
+        """The actor in numpy (vector observations on the CPU), or None: ``act`` uses torch."""
+        return self._numpy_actor
     def _to_tensors(self, obs: Sequence[np.ndarray]) -> list[torch.Tensor]:
         return [torch.as_tensor(np.asarray(o, dtype=np.float32), device=self.device) for o in obs]
 
@@ -161,7 +165,7 @@ class Policy:
         log_parts: list[np.ndarray] = []
         gaussian_entropy, branch_probs = None, []
         if mu is not None:
-            sigma, variance_term, log_term, gaussian_entropy_mean = self._numpy_actor.gaussian
+            sigma, variance_term, log_term, gaussian_entropy_mean = self._numpy_actor.gaussian()
             if deterministic:
                 raw = mu
             else:

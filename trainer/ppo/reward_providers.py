@@ -34,7 +34,7 @@ from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.layers import KAIMING_NORMAL, Swish, linear_layer
 from trainer.ppo.losses import masked_mean
 from trainer.ppo.networks import NetworkBody
-from trainer.protocol.types import ActionSpec, BehaviorSpec
+from protos.types import ActionSpec, BehaviorSpec
 
 CURIOSITY_HIDDEN = 256  # the inverse and forward models' hidden width (fixed in the reference)
 FORWARD_WEIGHT = 0.2  # loss = LOSS_MULTIPLIER * (0.2 forward + 0.8 inverse)

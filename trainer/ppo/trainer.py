@@ -14,10 +14,10 @@ import torch
 
 from trainer.config.support import SUPPORTED_REWARD_SIGNALS
 from trainer.errors import ConfigError
-from trainer.ppo import fast_actor, numpy_update
+from trainer.ppo import numpy_net, numpy_update
 from trainer.ppo.adam import Adam
 from trainer.ppo.buffer import Trajectory, UpdateBuffer
-from trainer.ppo.fast_actor import NumpyCritic
+from trainer.ppo.numpy_net import NumpyCritic
 from trainer.ppo.gae import gae
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.losses import masked_mean, policy_loss, ppo_loss, value_loss
@@ -25,7 +25,7 @@ from trainer.ppo.networks import Critic
 from trainer.ppo.policy import Policy
 from trainer.ppo.reward_providers import Experience, make_providers
 from trainer.ppo.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
-from trainer.protocol.types import BehaviorSpec
+from protos.types import BehaviorSpec
 
 ADVANTAGE_STD_EPSILON = 1e-10
 logger = logging.getLogger("mlagents_like")
@@ -48,7 +48,7 @@ class PPOTrainer:
     """PPO for one brain: ``policy`` acts, the critic estimates values, one Adam updates both."""
 
     def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams,
-                 seed: int, device: str = "cpu", numpy_update: bool = True):
+                 seed: int, device: str = "cpu", use_numpy_update: bool = True):
         for name in hyperparams.reward_signals:
             if name not in SUPPORTED_REWARD_SIGNALS:
                 raise ConfigError(
@@ -71,7 +71,7 @@ class PPOTrainer:
         trainable = [
             p for p in chain(self.policy.actor.parameters(), self.critic.parameters()) if p.requires_grad
         ]
-        self.optimizer = Adam(trainable, lr=hyperparams.learning_rate)  # torch.optim costs 2 s of imports
+        self.optimizer = Adam(trainable, lr=hyperparams.learning_rate)  # adam.py says why not torch.optim
         # curiosity / rnd: their own networks and optimizers (reward_providers.py)
         self.providers = make_providers(behavior_spec, hyperparams, seed + 4)
         self._needs_next_obs = any(p.needs_next_obs for p in self.providers.values())
@@ -85,11 +85,12 @@ class PPOTrainer:
         self.buffer = UpdateBuffer()
         self.step = 0
         # minibatch steps in numpy for vector-observation networks on the CPU (numpy_update.py);
-        # MLAGENTS_LIKE_NUMPY_UPDATE=0 (``numpy_update`` False) keeps autograd
-        self.numpy_update = numpy_update
+        # MLAGENTS_LIKE_NUMPY_UPDATE=0 (``use_numpy_update`` False) keeps autograd
+        self.numpy_update = use_numpy_update
         # value estimates of vector-observation critics in numpy: no per-trajectory torch op overhead
         self._numpy_critic = NumpyCritic(self.critic) if (
-            fast_actor.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
+            numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
+        self._numpy_ppo: numpy_update.NumpyPPO | None = None  # built at the first numpy update
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays: list[np.ndarray]) -> list[torch.Tensor]:
@@ -276,7 +277,13 @@ class PPOTrainer:
         collected: dict[str, list[float]] = {}
         if self.numpy_update and numpy_update.supports(self):
             self._update_numpy(learning_rate, beta, epsilon, collected)
-            return self._finish_update(collected, learning_rate, beta, epsilon)
+        else:
+            self._update_torch(beta, epsilon, collected)
+        return self._finish_update(collected, learning_rate, beta, epsilon)
+
+    def _update_torch(self, beta: float, epsilon: float, collected: dict[str, list[float]]) -> None:
+        """Autograd through the torch modules (recurrent, visual or shared-body networks, or
+        MLAGENTS_LIKE_NUMPY_UPDATE=0), stepped by the same Adam."""
         data = self._buffer_tensors()
         for order in self._minibatch_indices():
             index = order.to(self.device)
@@ -288,7 +295,6 @@ class PPOTrainer:
             stats.update(self._update_providers(batch))
             for key, value in stats.items():
                 collected.setdefault(key, []).append(value)
-        return self._finish_update(collected, learning_rate, beta, epsilon)
 
     def _update_providers(self, batch: dict[str, Any]) -> dict[str, float]:
         """One step of every curiosity / rnd learner on a PPO minibatch (numpy or torch columns)."""
@@ -333,21 +339,20 @@ class PPOTrainer:
         if self.providers:
             provider_columns = {_obs_key(i): o for i, o in enumerate(obs)}
             provider_columns.update({k: data.pop(k) for k in [_next_obs_key(i) for i in range(n_obs)] if k in data})
-        stepper = numpy_update.NumpyPPO(self)
+        if self._numpy_ppo is None:
+            self._numpy_ppo = numpy_update.NumpyPPO(self.policy.numpy_actor, self._numpy_critic, self.optimizer)
+        stepper = self._numpy_ppo
         actor_in, critic_in = stepper.prepare(obs)
         orders = [order.numpy() for order in self._minibatch_indices()]
-        try:
-            results = stepper.run(data, actor_in, critic_in, orders, learning_rate, beta, epsilon)
-            if self.providers:  # curiosity / rnd: networks of their own, on the same minibatches
-                columns = {**data, **provider_columns}
-                for stats, index in zip(results, orders):
-                    batch = {k: v[index] for k, v in columns.items()}
-                    stats.update(self._update_providers(batch))
-            for stats in results:
-                for key, value in stats.items():
-                    collected.setdefault(key, []).append(value)
-        finally:
-            stepper.finish()
+        results = stepper.run(data, actor_in, critic_in, orders, learning_rate, beta, epsilon)
+        if self.providers:  # curiosity / rnd: networks of their own, on the same minibatches
+            columns = {**data, **provider_columns}
+            for stats, index in zip(results, orders):
+                batch = {k: v[index] for k, v in columns.items()}
+                stats.update(self._update_providers(batch))
+        for stats in results:
+            for key, value in stats.items():
+                collected.setdefault(key, []).append(value)
 
     def _finish_update(self, collected: dict[str, list[float]], learning_rate: float, beta: float,
                        epsilon: float) -> dict[str, float]:

@@ -1,10 +1,7 @@
-"""The wire protocol to ML-Agents simulators (spec §1–§3).
+"""The trainer's end of the wire protocol (docs/protocol.md); the shared pieces live in ``protos``.
 
-* ``types``         — BehaviorSpec, DecisionSteps, TerminalSteps, ActionTuple, StepResult
-* ``codec``         — pure proto ⇄ numpy translation, version check, capabilities
-* ``png``           — PNG camera observations → float32 C×H×W
-* ``server``        — ``UnityEndpoint``: the gRPC server side of one simulator connection
-* ``side_channels`` — framing of the ``side_channel`` bytes
-
-Nothing is imported here so that ``trainer.protocol.types`` stays cheap to import.
+* ``codec``  — one decode of a simulator's message into DecisionSteps/TerminalSteps, one encode
+  of the answer; version check
+* ``png``    — PNG camera observations → float32 C×H×W
+* ``server`` — ``UnityEndpoint``: the gRPC server side of one simulator connection
 """

@@ -2,9 +2,10 @@
 
 The simulator (Unity or unity-stub-env) is the gRPC client: every message it sends is the request
 of an ``Exchange`` call, and the trainer's next message is that call's response. Two transports
-carry the calls, both handing the trainer raw request bytes that it parses once, on its thread:
+carry the calls, both handing the trainer raw request bytes that ``codec.decode_message`` decodes
+once, on its thread:
 
-* ``http2`` (default): ``trainer.protocol.http2``, a single-threaded HTTP/2 server; the
+* ``http2`` (default): ``protos.http2``, a single-threaded HTTP/2 server; the
   trainer's thread reads requests off the socket and writes answers itself.
 * ``grpcio`` (``MLAGENTS_LIKE_TRANSPORT=grpcio``): grpcio's server; a servicer thread parks each
   call in a slot until the trainer answers it. Kept as a fallback and as the reference the
@@ -27,20 +28,19 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Callable, Mapping
 
-from google.protobuf.message import DecodeError
-
 from protos.communicator_objects import unity_message_pb2
+from protos.errors import ProtocolError
+from protos.http2 import GRPC_INTERNAL, Http2Transport
+from protos.types import ActionTuple, BehaviorSpec, StepResult
+from protos.versions import COMMUNICATION_VERSION, PACKAGE_VERSION, all_true_capabilities
 from trainer.config.env_vars import TRANSPORTS
 from trainer.errors import (
     PortInUseError,
-    ProtocolError,
     SimulatorExitedError,
     UnityCommunicatorStoppedError,
     UnityTimeOutError,
 )
-from trainer.protocol import codec, records
-from trainer.protocol.http2 import GRPC_INTERNAL, Http2Transport
-from trainer.protocol.types import ActionTuple, BehaviorSpec, StepResult
+from trainer.protocol import codec
 from trainer.stop import STOP
 
 if TYPE_CHECKING:  # grpcio is imported by its transport only (MLAGENTS_LIKE_TRANSPORT=grpcio)
@@ -106,7 +106,13 @@ class _PendingCall:
 
 class _GrpcioTransport:
     """grpcio's server with a rendezvous: each incoming call is parked in a slot until the
-    trainer's thread answers it (or the transport closes, or the client goes away)."""
+    trainer's thread answers it (or the transport closes, or the client goes away).
+
+    Not the default: its threads make an exchange cost about 0.5 ms where ``http2`` takes
+    0.06 ms (bench/transport.py, round trip with a 150-byte request). Kept for two reasons: it
+    is the independent server implementation the endpoint tests also run against (the same
+    test must pass on both), and a fallback (MLAGENTS_LIKE_TRANSPORT=grpcio) should a Unity
+    build's gRPC client meet something our server does not handle."""
 
     def __init__(self, bind: str, port: int, max_message_bytes: int) -> None:
         self.bind = bind
@@ -216,8 +222,8 @@ class UnityEndpoint:
         """``describe``: names the simulator in errors (a callable is asked when the error
         happens, so it can say how the process ended). ``spin_wait`` (s): poll for the simulator's
         next call up to this long past when it is due instead of sleeping through it
-        (trainer/protocol/pacing.py; HTTP/2 transport only). ``transport``: one of TRANSPORTS
-        (the run's MLAGENTS_LIKE_TRANSPORT, trainer.config.env_vars)."""
+        (protos/pacing.py; HTTP/2 transport only). ``transport``: one of TRANSPORTS (the run's
+        MLAGENTS_LIKE_TRANSPORT, trainer.config.env_vars)."""
         self.port = port
         self.bind = bind
         self.timeout_wait = float(timeout_wait)
@@ -231,7 +237,6 @@ class UnityEndpoint:
             raise ValueError(f"unknown transport {self.transport_name!r}")
         self._transport = None
         self._pending = None  # the simulator call we owe an answer
-        self._large_lists = True  # whether to look for agent info lists to decode from bytes
         self._deciding: dict[str, int] = {}  # agents per behavior that wait for an action
         self._messages_received = 0
         self._closed = False
@@ -302,7 +307,7 @@ class UnityEndpoint:
         Returns M1's UnityRLInitializationOutputProto. Raises UnityVersionError for an
         incompatible communication API (the M1 call stays pending; ``close()`` answers it).
         """
-        first = self._wait_for_call().request
+        first = self._wait_for_call().message
         if not first.unity_output.HasField("rl_initialization_output"):
             raise ProtocolError(
                 f"The first message from the simulator{self._for()} carried no initialization "
@@ -314,7 +319,7 @@ class UnityEndpoint:
             logger.warning(
                 "The Unity environment%s (package %s) does not report the base RL capabilities; "
                 "upgrade its ML-Agents package to one compatible with Python package %s.",
-                self._for(), init.package_version, codec.PACKAGE_VERSION,
+                self._for(), init.package_version, PACKAGE_VERSION,
             )
         logger.debug(
             "Connected to Unity environment with package version %s and communication version %s",
@@ -323,9 +328,9 @@ class UnityEndpoint:
         response = _status_message(STATUS_OK)
         init_input = response.unity_input.rl_initialization_input
         init_input.seed = seed
-        init_input.communication_version = codec.COMMUNICATION_VERSION
-        init_input.package_version = codec.PACKAGE_VERSION
-        init_input.capabilities.CopyFrom(codec.all_true_capabilities())
+        init_input.communication_version = COMMUNICATION_VERSION
+        init_input.package_version = PACKAGE_VERSION
+        init_input.capabilities.CopyFrom(all_true_capabilities())
         init_input.num_areas = num_areas
         self._answer(response)
         self._wait_for_call()  # M2: no output; answered by the first reset
@@ -335,9 +340,7 @@ class UnityEndpoint:
     # ------------------------------------------------------------------ exchanges
     def send_reset(self, side_channel: bytes = b"") -> None:
         """Answer the pending simulator call with RESET (no actions). Does not block."""
-        response = _status_message(STATUS_OK)
-        codec.fill_rl_input(response.unity_input.rl_input, {}, side_channel, codec.RESET)
-        self._answer(response)
+        self._answer_bytes(codec.encode_answer({}, side_channel, codec.RESET))
 
     def send_step(self, actions: Mapping[str, ActionTuple], side_channel: bytes = b"") -> None:
         """Answer the pending call with STEP. Does not block.
@@ -355,19 +358,11 @@ class UnityEndpoint:
                 raise ValueError(
                     f"{name}: {rows.pop()} action rows for {self._deciding.get(name, 0)} deciding agents"
                 )
-        payload = codec.step_message_bytes(full_actions, side_channel)
-        if payload is None:  # an action the direct encoder leaves to the protobuf objects
-            response = _status_message(STATUS_OK)
-            codec.fill_rl_input(response.unity_input.rl_input, full_actions, side_channel, codec.STEP)
-            payload = response.SerializeToString()
-        self._answer_bytes(payload)
+        self._answer_bytes(codec.encode_answer(full_actions, side_channel))
 
     def receive(self) -> StepResult:
         """Wait for the simulator's next message and decode it (leaves that call pending)."""
-        call = self._wait_for_call()
-        result = codec.decode_rl_output(call.request.unity_output, self.behavior_specs, call.raw_lists)
-        self._large_lists = any(len(decision) + len(terminal) >= records.MIN_ROWS
-                                for decision, terminal in result.steps.values())
+        result = self._wait_for_call().result
         self.behavior_specs.update(result.specs)
         self._deciding = {name: len(steps[0]) for name, steps in result.steps.items()}
         return result
@@ -390,8 +385,9 @@ class UnityEndpoint:
         call, self._pending = self._pending, None
         call.answer(payload)
 
-    def _wait_for_call(self) -> "_Call":
-        """Block until the simulator's next call arrives; it becomes the pending call."""
+    def _wait_for_call(self) -> codec.DecodedMessage:
+        """Block until the simulator's next call arrives; it becomes the pending call, its
+        message is decoded (once, here, by the codec) and returned."""
         if self._transport is None or self._closed:
             raise RuntimeError("UnityEndpoint is not started or already closed")
         if self._pending is not None:
@@ -415,29 +411,26 @@ class UnityEndpoint:
             if remaining <= 0:
                 raise self._timeout_error(time.monotonic() - started)
             wait = min(poll_interval, remaining)
-        # large agent info lists are kept as bytes and decoded once, by the codec; looked for
-        # while the last message had one (agent counts rarely change: small scenes skip the walk)
-        split = records.split_agent_lists(call.payload, records.MIN_ROWS) if self._large_lists else None
-        payload, raw_lists = split if split is not None else (call.payload, None)
+        self._pending = call  # pending before decoding: close() answers it if the data is bad
+        self._messages_received += 1
         try:
-            request = unity_message_pb2.UnityMessageProto.FromString(payload)
-        except DecodeError as error:
+            decoded = codec.decode_message(call.payload, self.behavior_specs)
+        except codec.NotAMessageError as error:
+            self._pending = None
             call.fail(GRPC_INTERNAL, "the message is not a valid UnityMessageProto")
             raise ProtocolError(
-                f"The simulator{self._for()} on port {self.port} sent a message that is not a valid "
-                f"UnityMessageProto ({error}); is it an ML-Agents environment speaking "
-                "communication API 1.x? Rebuild it with the ML-Agents package of Release 22."
+                f"The simulator{self._for()} on port {self.port} sent a message that is "
+                f"{error}; is it an ML-Agents environment speaking communication API 1.x? "
+                "Rebuild it with the ML-Agents package of Release 22."
             ) from None
-        call = _Call(call, request, raw_lists)
-        self._pending = call
-        self._messages_received += 1
-        if request.header.status != STATUS_OK:
+        status = decoded.message.header.status
+        if status != STATUS_OK:
             self._answer(_status_message(STATUS_CLOSING))
             raise UnityCommunicatorStoppedError(
                 f"The simulator{self._for()} on port {self.port} closed the connection "
-                f"(status {request.header.status})."
+                f"(status {status})."
             )
-        return call
+        return decoded
 
     def _raise_if_simulator_died(self) -> None:
         if self.is_alive is not None and not self.is_alive():
@@ -458,17 +451,3 @@ class UnityEndpoint:
     def _for(self) -> str:
         describe = self.describe() if callable(self.describe) else self.describe
         return f" ({describe})" if describe else ""
-
-
-class _Call:
-    """A transport's call with its request parsed once, on the trainer's thread."""
-
-    __slots__ = ("raw", "request", "raw_lists")
-
-    def __init__(self, raw, request: unity_message_pb2.UnityMessageProto, raw_lists=None) -> None:
-        self.raw = raw
-        self.request = request
-        self.raw_lists = raw_lists  # agent info lists left as bytes (records.split_agent_lists)
-
-    def answer(self, response: bytes) -> None:
-        self.raw.answer(response)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     DimensionProperty,
     ObservationSpec,

@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from trainer.protocol.types import ActionSpec, ObservationSpec, StatsAggregationMethod
+from protos.types import ActionSpec, ObservationSpec, StatsAggregationMethod
 
 Stat = tuple[str, float, StatsAggregationMethod]
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from trainer.protocol.types import (
+from protos.types import (
     ActionSpec,
     DimensionProperty,
     ObservationSpec,

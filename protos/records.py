@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trainer.protocol import wire
+from protos import wire
 
 # AgentInfoProto (spec §2): 7 reward f32, 8 done, 9 max_step_reached, 10 id int32,
 # 11 action_mask repeated bool (packed), 13 observations, 14 group_id int32, 15 group_reward f32

@@ -1,11 +1,12 @@
-"""The numpy actor used for deciding must equal the torch actor, and follow every weight change."""
+"""The numpy actor and critic (numpy_net.py) must equal the torch modules they read and follow
+every change of their weights and normalisers by themselves: they are views, not copies."""
 import numpy as np
 import torch
 
-from trainer.ppo.fast_actor import NumpyActor, supports
+from protos.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.networks import Actor
-from trainer.protocol.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
+from trainer.ppo.numpy_net import NumpyActor, supports
 
 HP = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
 
@@ -36,7 +37,8 @@ def test_hybrid_heads_match_torch_and_follow_updates():
         for a, b in zip(logits, t_logits):
             np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-4)
         assert np.all(logits[0][:, 1] < -1e7)  # the masked option
-        # change everything the fast copy caches: normaliser statistics and weights
+        # change everything in place, as a trajectory and an optimiser step do: normaliser
+        # statistics and weights (nobody tells the numpy actor)
         actor.update_normalization([torch.from_numpy(o * (round_ + 2)) for o in obs])
         with torch.no_grad():
             for p in actor.parameters():
@@ -44,25 +46,29 @@ def test_hybrid_heads_match_torch_and_follow_updates():
                     p.add_(0.05)
 
 
-def test_normaliser_updates_refresh_only_the_normalisers():
-    """A normaliser update (every trajectory) must reach the numpy actor without re-copying its
-    weights; a weight change must re-copy them."""
+def test_weights_are_views_of_the_torch_parameters():
+    """No copies to keep in step: the numpy actor's kernels are the torch parameters' memory,
+    contiguous as W^T (layers.py stores Linear kernels input-major)."""
     torch.manual_seed(0)
     actor = Actor((vec(3),), ActionSpec(2, ()), HP)
     fast = NumpyActor(actor)
     obs = [np.array([[1.0, -2.0, 0.5], [4.0, 3.0, -1.0]], np.float32)]
     before, _, _ = fast.heads(obs, None)
-    layers = fast.layers
+    layers = [actor.network_body.hidden[0], actor.network_body.hidden[2], actor.mu]
+    for (kernel, bias), layer in zip([*fast.body.kernels, fast.mu], layers):
+        assert kernel.flags.c_contiguous and np.shares_memory(kernel, layer.weight.detach().numpy())
+        assert np.shares_memory(bias, layer.bias.detach().numpy())
+    np.testing.assert_array_equal(fast.mu[0], actor.mu.weight.detach().numpy().T)
     actor.update_normalization([torch.from_numpy(obs[0] * 10)])
     after, _, _ = fast.heads(obs, None)
     np.testing.assert_allclose(after, torch_heads(actor, obs, None)[0], rtol=1e-5, atol=1e-6)
     assert not np.allclose(before, after)
-    assert fast.layers is layers  # weights untouched: no copy
     with torch.no_grad():
         actor.network_body.hidden[0].weight.add_(0.1)
+        actor.log_sigma.add_(1.0)
     moved, _, _ = fast.heads(obs, None)
-    assert fast.layers is not layers
     np.testing.assert_allclose(moved, torch_heads(actor, obs, None)[0], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(fast.gaussian()[0], np.exp(actor.log_sigma.detach().numpy()), rtol=1e-6)
 
 
 def test_load_state_dict_is_seen_and_visual_actors_are_not_supported():
@@ -81,7 +87,7 @@ def test_load_state_dict_is_seen_and_visual_actors_are_not_supported():
 
 
 def test_numpy_critic_matches_torch_and_follows_normaliser_and_weight_changes():
-    from trainer.ppo.fast_actor import NumpyCritic
+    from trainer.ppo.numpy_net import NumpyCritic
     from trainer.ppo.networks import Critic
 
     torch.manual_seed(0)

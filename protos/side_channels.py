@@ -20,14 +20,14 @@ from typing import Callable
 
 import numpy as np
 
-from trainer.errors import ProtocolError
-from trainer.protocol.side_channel_wire import (  # re-exported: framing and primitives
+from protos.errors import ProtocolError
+from protos.side_channel_wire import (  # re-exported: framing and primitives
     PayloadReader,
     PayloadWriter,
     pack_messages,
     unpack_messages,
 )
-from trainer.protocol.types import StatsAggregationMethod
+from protos.types import StatsAggregationMethod
 
 logger = logging.getLogger("mlagents_like")
 

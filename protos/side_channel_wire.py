@@ -3,7 +3,7 @@
 Framing: the ``side_channel`` field is a concatenation of messages, each
 ``16 bytes channel UUID (uuid.bytes_le, .NET Guid order) | int32 payload length n | n bytes payload``.
 Primitives: bool (1 byte), int32, float32, string (int32 byte length + ASCII bytes),
-float list (int32 count + that many float32). Import these through ``trainer.protocol.side_channels``.
+float list (int32 count + that many float32). Import these through ``protos.side_channels``.
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from typing import Iterable
 
 import numpy as np
 
-from trainer.errors import ProtocolError
+from protos.errors import ProtocolError
 
 _HEADER = struct.Struct("<16si")
 

@@ -11,7 +11,7 @@ took after our message left, blocks (CPU given away) until shortly before the ea
 then polls the socket without sleeping for at most ``spin_s`` past it, then blocks again. The
 CPU spent polling is bounded per exchange by ``LEAD_S + spin_s``; ``spin_s = 0`` turns pacing
 off (plain blocking). Only worth it when every process of the run has a CPU of its own, which is
-what ``spin_budget`` decides.
+what ``trainer.envs.cpus.spin_budget`` decides for the trainer and its simulators.
 
 Every poll yields the CPU first (``os.sched_yield``). A socket write wakes the reader as a
 "sync" wake-up (the kernel assumes the writer is about to sleep) and so tends to put it on the
@@ -32,28 +32,6 @@ LEAD_S = 0.5e-3  # stop blocking this long before the earliest expected answer
 _HISTORY = 16
 # give the CPU to whatever else is runnable on it, before every poll (see above)
 yield_cpu = getattr(os, "sched_yield", lambda: None)
-
-
-def usable_cpus() -> int:
-    """CPUs this process may run on (the affinity mask: a Slurm allocation, taskset)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
-
-
-def stub_args(spin_s: float, transport: str = "http2") -> list[str]:
-    """The stub's command-line arguments for a polling budget of ``spin_s`` s (none for 0) and
-    a gRPC ``transport`` (none for the stub's default, http2)."""
-    return ((["--spin-wait-ms", f"{spin_s * 1e3:g}"] if spin_s > 0 else [])
-            + (["--transport", transport] if transport != "http2" else []))
-
-
-def spin_budget(processes: int, spin_s: float) -> float:
-    """``spin_s`` (MLAGENTS_LIKE_SPIN_WAIT_MS: trainer.config.env_vars) if each of ``processes``
-    busy processes (the trainer and its simulators) has a CPU of its own, else 0: polling on a
-    shared CPU would take it from the process we wait for."""
-    return spin_s if usable_cpus() >= processes else 0.0
 
 
 class PacedWait:

@@ -27,11 +27,12 @@ _ONE_BYTE = tuple(bytes([value]) for value in range(0x80))  # the varints of 0..
 
 
 def varint(value: int) -> bytes:
-    """The shortest varint of a non-negative integer."""
+    """The shortest varint of an integer; a negative int32/int64 is written as protobuf does,
+    as the 10-byte varint of its 64-bit two's complement."""
     if 0 <= value < 0x80:  # tags, lengths and ids of small messages: no loop, no new bytes
         return _ONE_BYTE[value]
     if value < 0:
-        raise ValueError("negative values need 10-byte varints; not used here")
+        value += 1 << 64
     out = bytearray()
     while True:
         byte = value & 0x7F
@@ -53,6 +54,18 @@ def len_prefix(field_number: int, length: int) -> bytes:
     """Tag and byte length of a length-delimited field holding ``length`` bytes (cached: a
     simulator's messages repeat the same few lengths every step)."""
     return tag(field_number, LEN) + varint(length)
+
+
+def field(field_number: int, content: bytes) -> bytes:
+    """A length-delimited field: tag, byte length, then ``content`` (a sub-message, bytes, a
+    packed array)."""
+    return len_prefix(field_number, len(content)) + content
+
+
+def map_entry(field_number: int, key: str, value: bytes) -> bytes:
+    """One entry of a ``map<string, Message>`` field: key (1), then the serialized value (2)."""
+    name = key.encode()
+    return field(field_number, len_prefix(1, len(name)) + name + len_prefix(2, len(value)) + value)
 
 
 def float_columns(values: np.ndarray, n: int) -> np.ndarray:
@@ -122,6 +135,12 @@ def rows(parts: Sequence[Part], n: int) -> np.ndarray:
     for (column, w), part in zip(blocks, [p for p in parts if not isinstance(p, bytes)]):
         out[:, column:column + w] = part
     return out
+
+
+# UnityMessageProto.header (1) = HeaderProto{status (1) = 200}: every answer and every step
+# message starts with these bytes; both ends write them directly
+_HEADER_OK = tag(1, VARINT) + varint(200)
+HEADER_OK_FIELD = len_prefix(1, len(_HEADER_OK)) + _HEADER_OK
 
 
 def repeated_rows(field_number: int, parts: Sequence[Part], n: int) -> bytes:

@@ -1,0 +1,87 @@
+"""The three packages' import rules, read from the source (an AST scan of every import):
+
+* ``protos`` (the wire contract) imports neither ``trainer`` nor ``unity_stub_env``;
+* ``unity_stub_env`` imports ``protos``, itself and third-party libraries, never ``trainer``;
+* ``trainer`` uses only the stub's public API: names in ``unity_stub_env.__all__``, imported from
+  the package itself (``from unity_stub_env import TASK_NAMES``), never a stub module.
+
+So a bug in a shared encoder cannot hide behind one side's private copy, and either package can
+change its internals without breaking the other.
+"""
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import pytest
+
+from protos import wire
+from protos.communicator_objects import header_pb2
+import unity_stub_env
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def imports(package: str) -> list[tuple[str, int, str, tuple[str, ...]]]:
+    """(file, line, imported module, imported names) for every import under ``package``,
+    including imports inside functions."""
+    found = []
+    for path in sorted((REPO / package).rglob("*.py")):
+        tree = ast.parse(path.read_text(), filename=str(path))
+        where = str(path.relative_to(REPO))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                found += [(where, node.lineno, alias.name, ()) for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:  # relative import: stays inside its own package
+                    continue
+                found.append((where, node.lineno, node.module or "", tuple(a.name for a in node.names)))
+    return found
+
+
+def top(module: str) -> str:
+    return module.split(".")[0]
+
+
+def test_the_scan_sees_imports_inside_functions_and_from_imports(tmp_path, monkeypatch):
+    """The scanner itself: a lazy import in a function body and a ``from`` import both count."""
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "m.py").write_text("import os\ndef f():\n    from trainer.errors import ConfigError\n")
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    assert [(line, module, names) for _, line, module, names in imports("pkg")] == [
+        (1, "os", ()), (3, "trainer.errors", ("ConfigError",))]
+
+
+@pytest.mark.parametrize("package, forbidden", [
+    ("protos", {"trainer", "unity_stub_env"}),
+    ("unity_stub_env", {"trainer"}),
+])
+def test_package_imports_none_of(package, forbidden):
+    bad = [f"{where}:{line} imports {module}" for where, line, module, _ in imports(package)
+           if top(module) in forbidden]
+    assert bad == []
+
+
+def test_trainer_uses_only_the_stubs_public_api():
+    public = set(unity_stub_env.__all__)
+    bad = []
+    for where, line, module, names in imports("trainer"):
+        if top(module) != "unity_stub_env":
+            continue
+        if module != "unity_stub_env" or not names or not set(names) <= public:
+            bad.append(f"{where}:{line} imports {module} {names}")
+    assert bad == []
+
+
+def test_the_stubs_public_api_is_there():
+    for name in unity_stub_env.__all__:
+        assert getattr(unity_stub_env, name) is not None
+    assert unity_stub_env.spin_wait_args(0.0015) == ["--spin-wait-ms", "1.5"]
+    assert unity_stub_env.spin_wait_args(0.0) == []
+
+
+def test_the_status_200_header_is_protobufs():
+    header = header_pb2.HeaderProto(status=200).SerializeToString()
+    assert wire.HEADER_OK_FIELD == b"\x0a" + bytes([len(header)]) + header == b"\x0a\x03\x08\xc8\x01"

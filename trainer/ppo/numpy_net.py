@@ -1,0 +1,248 @@
+"""The vector-observation actor and critic of networks.py, run in numpy on the same parameters.
+
+networks.py is the one definition of the networks: layers, initialisation, parameters, and the
+torch forward pass used for ONNX export, recurrent and visual training, and as the reference in
+the tests. This module reads those modules (never a second description of them) and runs their
+forward pass, and the hidden layers' backward pass, in numpy:
+
+* acting and value estimates: inside the trainer process every small torch op releases the GIL
+  and gRPC's threads take it each time; measured under load, ``Policy.act`` for one agent took
+  3 ms of ~40 tiny ops, the same forward pass in numpy (a few small matmuls that keep the GIL)
+  tens of microseconds;
+* the PPO update (numpy_update.py): per-op dispatch and autograd dominate a minibatch of these
+  small networks; the numpy update is ~3x faster (tests check it against autograd).
+
+Parameters are never copied: every weight and bias here is a numpy view of the torch tensor
+(shared memory), so an optimiser step, a load_state_dict or the numpy update (which writes
+through these views, with Adam from adam.py) is seen at once by both sides, with nothing to sync.
+Linear kernels are stored input-major (layers.py), so the views of W^T are contiguous, which
+OpenBLAS multiplies fastest. What is *derived* from parameters (the normalisers' std, the
+Gaussian's sigma terms, the LSTM's summed biases) is cached and recomputed whenever the bytes it
+comes from differ (a ~0.2 us comparison per call; see ``_Derived``).
+
+Math (same as Actor.heads / Critic.forward): x_i -> clip((x_i - mean_i)/sqrt(var_sum_i/steps_i),
+-5, 5) if normalised; h = concat(x_i); h = swish(h W_l^T + b_l) per hidden layer; optional LSTM
+(torch's gate order i, f, g, o); mu = h W_mu^T + b_mu; branch logits = (h W_b^T + b_b) masked to
+-1e8; value_k = h W_k^T + b_k.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from trainer.ppo.distributions import EPSILON
+from trainer.ppo.encoders import VectorInput
+from trainer.ppo.networks import Actor, Critic, NetworkBody
+
+
+def supports(module: Actor | Critic, recurrent: bool = False) -> bool:
+    """Vector observations only, not a critic on the actor's body (the numpy update's gradients
+    assume separate bodies), and no LSTM unless ``recurrent`` (forward passes step the LSTM in
+    numpy; the numpy update does not train one)."""
+    body = module.network_body
+    return (not getattr(module, "shared", False) and (recurrent or body.lstm is None)
+            and all(isinstance(e, VectorInput) for e in body.observation_encoder.encoders))
+
+
+def view(tensor: torch.Tensor) -> np.ndarray:
+    """A numpy view of a CPU tensor's storage (writes reach torch and back)."""
+    return tensor.detach().numpy()
+
+
+def _linear(module: nn.Linear) -> tuple[np.ndarray, np.ndarray]:
+    """(W^T [in, out], b [out]) of a Linear layer as views (W^T contiguous: see layers.py)."""
+    return view(module.weight).T, view(module.bias)
+
+
+class _Derived:
+    """``compute(*arrays)``, recomputed only when the bytes of ``arrays`` (views of small torch
+    tensors: normaliser buffers, log_sigma, LSTM biases) changed since the last call. Comparing
+    bytes needs no knowledge of who changed them, or how (no torch version counters)."""
+
+    def __init__(self, compute, *arrays: np.ndarray) -> None:
+        self.compute, self.arrays = compute, arrays
+        self._key: bytes | None = None
+        self._value = None
+
+    def __call__(self):
+        key = b"".join([a.tobytes() for a in self.arrays])
+        if key != self._key:
+            self._value = self.compute(*self.arrays)
+            self._key = key
+        return self._value
+
+
+def _mean_std(mean: np.ndarray, variance: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A Normalizer's (mean, std) in float32, std as torch's float32 / int64 division computes it."""
+    std = np.sqrt(variance / variance.dtype.type(steps))
+    return mean.astype(np.float32), std.astype(np.float32, copy=False)
+
+
+def _sigmoid(x: np.ndarray) -> np.ndarray:
+    return 1.0 / (1.0 + np.exp(-x))
+
+
+class NumpyBody:
+    """A NetworkBody's normalisers, hidden Linear layers and LSTM, as views of its torch tensors.
+
+    ``kernels``: (W^T, b) per hidden layer; ``linears``: the torch layers (the update's gradients
+    are keyed by their parameters)."""
+
+    def __init__(self, network_body: NetworkBody) -> None:
+        self.linears = [m for m in network_body.hidden if isinstance(m, nn.Linear)]
+        self.kernels = [_linear(m) for m in self.linears]
+        self.normalizers = [
+            None if encoder.normalizer is None else _Derived(_mean_std, *(view(buffer) for buffer in (
+                encoder.normalizer.running_mean, encoder.normalizer.running_variance,
+                encoder.normalizer.normalization_steps)))
+            for encoder in network_body.observation_encoder.encoders]
+        self.memory_size = network_body.memory_size
+        self.lstm = None  # (W_ih^T [in, 4h], W_hh^T [h, 4h], b_ih + b_hh [4h]) of the LSTM, if any
+        if network_body.lstm is not None:
+            lstm = network_body.lstm.lstm
+            self.lstm = (view(lstm.weight_ih_l0).T, view(lstm.weight_hh_l0).T,
+                         _Derived(np.add, view(lstm.bias_ih_l0), view(lstm.bias_hh_l0)))
+
+    def input(self, obs: list[np.ndarray]) -> np.ndarray:
+        """The hidden layers' input: each observation normalised and clipped, then concatenated."""
+        parts = []
+        for x, norm in zip(obs, self.normalizers):
+            x = np.asarray(x, dtype=np.float32)
+            if norm is not None:
+                mean, std = norm()
+                x = (x - mean) / std
+                np.maximum(x, -5.0, out=x)  # np.clip's values without its Python-level wrapper
+                np.minimum(x, 5.0, out=x)
+            parts.append(x)
+        return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+
+    def forward(self, h: np.ndarray, cache: list | None = None) -> np.ndarray:
+        """swish(h W^T + b) per hidden layer: [n, in] -> [n, hidden]. With ``cache`` (the update),
+        each layer's (input, pre-activation a, sigmoid(a)) is appended for ``backward``. The
+        elementwise steps run in place on fresh arrays (the inputs are never touched)."""
+        for kernel, bias in self.kernels:
+            a = h @ kernel
+            a += bias
+            s = np.negative(a)
+            np.exp(s, out=s)
+            s += 1.0
+            if cache is None:  # swish(a) = a / (1 + exp(-a))
+                a /= s
+                h = a
+            else:
+                np.reciprocal(s, out=s)  # s = sigmoid(a)
+                cache.append((h, a, s))
+                h = a * s
+        return h
+
+    def backward(self, grad_h: np.ndarray, cache: list, grads: dict[int, np.ndarray]) -> None:
+        """Gradients of the hidden layers' weights and biases into ``grads`` (keyed by id of the
+        torch parameter), from grad_h = d loss / d (last layer's output) and ``forward``'s cache."""
+        last = len(cache) - 1
+        for index, ((kernel, _), linear, (h_in, a, s)) in enumerate(
+                zip(reversed(self.kernels), reversed(self.linears), reversed(cache))):
+            grad_a = a * s  # grad_h * swish'(a) = grad_h * (s + a * s * (1 - s))
+            grad_a *= 1.0 - s
+            grad_a += s
+            grad_a *= grad_h
+            grads[id(linear.weight)] = (h_in.T @ grad_a).T  # laid out as the parameter (W^T contiguous)
+            grads[id(linear.bias)] = np.add.reduce(grad_a, axis=0)
+            if index < last:  # the first layer's input (the observations) needs no gradient
+                grad_h = grad_a @ kernel.T
+
+    def hidden(self, obs: list[np.ndarray]) -> np.ndarray:
+        """The last hidden layer's output [n, hidden]."""
+        return self.forward(self.input(obs))
+
+    def hidden_memory(self, obs: list[np.ndarray], memories: np.ndarray, sequence_length: int = 1
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """A recurrent body: rows are sequences of ``sequence_length`` steps starting from
+        memories [n_seq, m] -> (LSTM outputs [rows, m/2], memories after each sequence [n_seq, m])."""
+        h = self.hidden(obs)
+        w_in, w_hidden, bias = self.lstm
+        bias = bias()
+        size = w_hidden.shape[0]
+        inputs = (h @ w_in + bias).reshape(-1, sequence_length, 4 * size)  # the input part of every gate
+        state, cell = memories[:, :size].astype(np.float32), memories[:, size:].astype(np.float32)
+        outputs = np.empty((inputs.shape[0], sequence_length, size), dtype=np.float32)
+        for t in range(sequence_length):
+            gates = inputs[:, t] + state @ w_hidden
+            i, f, g, o = (gates[:, k * size:(k + 1) * size] for k in range(4))  # torch's gate order
+            cell = _sigmoid(f) * cell + _sigmoid(i) * np.tanh(g)
+            state = _sigmoid(o) * np.tanh(cell)
+            outputs[:, t] = state
+        return outputs.reshape(-1, size), np.concatenate([state, cell], axis=1)
+
+
+class _NumpyModule:
+    """What NumpyActor and NumpyCritic share: the torch module and its body."""
+
+    def __init__(self, module: Actor | Critic) -> None:
+        if not supports(module, recurrent=True):
+            raise ValueError(f"{type(self).__name__} handles vector observations only")
+        self.module = module
+        self.body = NumpyBody(module.network_body)
+        self.recurrent = module.network_body.lstm is not None  # (nn.Module attribute reads are slow)
+
+
+class NumpyCritic(_NumpyModule):
+    """The critic's forward pass in numpy (value estimates, and the numpy update)."""
+
+    def __init__(self, critic: Critic) -> None:
+        super().__init__(critic)
+        self.heads = {name: _linear(head) for name, head in critic.value_heads.items()}  # (W^T, b)
+
+    def __call__(self, obs: list[np.ndarray]) -> dict[str, np.ndarray]:
+        """Value estimates per reward signal, float32 [n] each."""
+        return self._values(self.body.hidden(obs))
+
+    def with_memory(self, obs: list[np.ndarray], memories: np.ndarray, sequence_length: int
+                    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """A recurrent critic: (values per signal [rows], memories after each sequence [n_seq, m])."""
+        h, memories = self.body.hidden_memory(obs, memories, sequence_length)
+        return self._values(h), memories
+
+    def _values(self, h: np.ndarray) -> dict[str, np.ndarray]:
+        return {name: (h @ weight + bias)[:, 0] for name, (weight, bias) in self.heads.items()}
+
+
+def _gaussian_terms(log_sigma: np.ndarray) -> tuple:
+    """What the Gaussian's log-prob and entropy need of log_sigma [1, c]: sigma, 2 sigma^2 + eps,
+    log(sigma + eps), the mean entropy."""
+    sigma = np.exp(log_sigma.astype(np.float32))
+    return (sigma, 2 * sigma**2 + EPSILON, np.log(sigma + EPSILON),
+            np.mean(0.5 * np.log(2 * np.pi * np.e * sigma**2 + EPSILON)))
+
+
+class NumpyActor(_NumpyModule):
+    """The actor's heads in numpy (deciding actions, and the numpy update)."""
+
+    def __init__(self, actor: Actor) -> None:
+        super().__init__(actor)
+        self.mu = _linear(actor.mu) if actor.mu is not None else None  # (W^T, b)
+        self.log_sigma = view(actor.log_sigma) if actor.mu is not None else None  # [1, c]
+        self.gaussian = _Derived(_gaussian_terms, self.log_sigma) if actor.mu is not None else None
+        self.branches = [_linear(b) for b in actor.discrete_branches]  # (W^T, b) per branch
+        self.offsets = actor.mask_offsets
+
+    def heads(self, obs: list[np.ndarray], action_mask: np.ndarray | None, memories: np.ndarray | None = None
+              ) -> tuple[np.ndarray | None, list[np.ndarray], np.ndarray | None]:
+        """mu [n, c] or None, masked logits [n, k_b] per branch (action_mask: bool [n, sum],
+        True = masked, or None), and for a recurrent actor the next memories [n, m] (from
+        ``memories``, zero if None)."""
+        memories_out = None
+        if self.recurrent:
+            if memories is None:
+                memories = np.zeros((len(obs[0]), self.body.memory_size), dtype=np.float32)
+            h, memories_out = self.body.hidden_memory(obs, memories, 1)
+        else:
+            h = self.body.hidden(obs)
+        mu = h @ self.mu[0] + self.mu[1] if self.mu is not None else None
+        logits = []
+        for index, (weight, bias) in enumerate(self.branches):
+            branch = h @ weight + bias
+            if action_mask is not None:  # logit * 1 - 0 where allowed, logit * 0 - 1e8 where masked
+                branch = np.where(action_mask[:, self.offsets[index]:self.offsets[index + 1]], -1e8, branch)
+            logits.append(branch)
+        return mu, logits, memories_out
