@@ -164,7 +164,8 @@ def test_environment_variables_reach_their_consumers(tmp_path, basic_config, mon
     from trainer import cli
     from trainer.envs import pool as pool_module
     from trainer.ppo import numpy_update
-    from trainer.protocol import pacing, server
+    from trainer.envs import cpus
+    from trainer.protocol import server
 
     for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "http_proxy", "https_proxy",
                  "HTTP_PROXY", "HTTPS_PROXY", "grpc_proxy"):
@@ -209,7 +210,7 @@ def test_environment_variables_reach_their_consumers(tmp_path, basic_config, mon
     assert run_threads == 3
     assert seen["transports"] == ["grpcio"] and seen["pool_spin_wait_s"] == 0.007
     player_log = (tmp_path / "res" / "vars" / "run_logs" / "Player-0.log").read_text()
-    polls = 7 if pacing.usable_cpus() >= 2 else 0  # the trainer and its one simulator need a CPU each
+    polls = 7 if cpus.usable_cpus() >= 2 else 0  # the trainer and its one simulator need a CPU each
     assert f"grpcio client, polling up to {polls} ms" in player_log
     assert seen["numpy_steppers"] == 0  # MLAGENTS_LIKE_NUMPY_UPDATE=0: torch autograd
     assert os.environ["OPENBLAS_NUM_THREADS"] == os.environ["MKL_NUM_THREADS"] == "2"
