@@ -12,6 +12,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+import torch
 
 from protos.types import BehaviorSpec
 from trainer.artifacts.atomic import atomic_copy
@@ -95,6 +96,7 @@ class BehaviorRunner:
     reward_buffer: deque = field(default_factory=lambda: deque(maxlen=1000))
     returns_since_checkpoint: list[float] = field(default_factory=list)
     last_checkpoint_step: int = -1
+    resumed_next_summary: int | None = None  # from the checkpoint's "Summaries" entry (--resume)
 
     @classmethod
     def create(cls, brain: str, spec: BehaviorSpec, settings, run_dir: str, seed: int, device: str,
@@ -124,12 +126,20 @@ class BehaviorRunner:
             ) from None
         if reset_step:
             self.trainer.step = 0
+        elif "Summaries" in state:
+            self.resumed_next_summary = int(state["Summaries"]["next_step"])
         logger.info("Loaded %s for behavior %s at step %d.", path, self.brain, self.trainer.step)
 
     def schedule_from_step(self) -> None:
+        """Next summary and checkpoint after (re)starting at the trainer's step. A resumed run
+        continues with the first summary its checkpoint's run had not written (a stop writes the
+        unfinished period's summary early, ``RunState.summarize_partial``): every TensorBoard
+        step is written once (docs/cluster.md)."""
         s = self.settings
         step = self.trainer.step
         self.next_summary = (step // s.summary_freq + 1) * s.summary_freq
+        if self.resumed_next_summary is not None and self.resumed_next_summary > step:
+            self.next_summary = self.resumed_next_summary
         interval = self.checkpoint_interval
         self.next_checkpoint = (step // interval + 1) * interval
 
@@ -169,6 +179,12 @@ class BehaviorRunner:
         step = self.trainer.step
         onnx_path, pt_path = self.paths.step_files(step)
         state = self.trainer.state_dict()
+        # The first summary a run resumed from this checkpoint writes. The final save comes after
+        # the last summary (and a stop's early one): the next is the first not written. A periodic
+        # save comes just before the summary of its period, which this run goes on to write (a run
+        # killed without warning too, unless it dies within the few steps between): the one after.
+        next_summary = self.next_summary if final else self.next_summary + self.settings.summary_freq
+        state["Summaries"] = {"next_step": torch.tensor(next_summary, dtype=torch.int64)}
         save_checkpoint(pt_path, state)
         save_checkpoint(self.paths.latest, state)
         self.trainer.export_onnx(onnx_path)

@@ -37,7 +37,7 @@ from trainer.curriculum import EnvironmentParameterManager
 from trainer.envs.pool import EnvPool, PoolSettings
 from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
 from trainer.rollout import AgentTracker, concat_masks
-from trainer.stop import STOP
+from trainer.stop import EXIT_STOPPED, STOP
 
 if TYPE_CHECKING:  # torch is imported only once the simulators are launched (see run_training)
     from trainer.behavior import BehaviorRunner
@@ -155,6 +155,9 @@ class RunState:
         elif settings.init_path:
             runner.restore(settings.init_path, reset_step=True)
         runner.schedule_from_step()
+        if ck.resume and not ck.inference:
+            # what a run killed without warning wrote after its last checkpoint is void
+            self.reporter.resume_from(brain, runner.next_summary - 1)
         self.runners[brain] = runner
         self.reporter.add_property(brain, PROPERTY_HYPERPARAMETERS, settings_as_dict(settings))
         return runner
@@ -252,9 +255,12 @@ class RunState:
 
     # ------------------------------------------------------------------ learning
     def learn(self, trajectories: list) -> None:
+        checkpointed = False
         for runner, traj in trajectories:
+            before = runner.last_checkpoint_step
             with self.timers.scope("process_trajectory"):
                 stats = runner.add_trajectory(traj, self.status)
+            checkpointed = checkpointed or runner.last_checkpoint_step != before
             for key, value in stats.items():
                 self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
         for runner in self.runners.values():
@@ -265,16 +271,40 @@ class RunState:
                     self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
             self._maybe_summarize(runner)
         self._update_curriculum()
+        if checkpointed:
+            self.save_status()
+
+    def save_status(self) -> None:
+        """training_status.json with the checkpoints and the curriculum's lessons as they are now.
+        Written with every periodic checkpoint too: a run killed without warning (SIGKILL, a node
+        failure) resumes from its last checkpoint with the lessons it had then."""
+        for name, lesson in self.params.lesson_numbers().items():
+            self.status.set_lesson_num(name, lesson)
+        self.status.save(os.path.join(self.run_dir, "run_logs", "training_status.json"))
 
     def _maybe_summarize(self, runner: BehaviorRunner) -> None:
         step = runner.trainer.step
         if step >= runner.next_summary:
-            for name, lesson in self.params.lesson_numbers().items():
-                self.reporter.add(runner.brain, f"Environment/Lesson Number/{name}", float(lesson),
-                                  StatsAggregationMethod.MOST_RECENT)
-            self.reporter.set(runner.brain, "Step", float(step))  # hidden from TensorBoard, a gauge
-            self.reporter.write(runner.brain, runner.next_summary, is_training=runner.training and not runner.done)
+            self._summarize(runner)
             while runner.next_summary <= step:
+                runner.next_summary += runner.settings.summary_freq
+
+    def _summarize(self, runner: BehaviorRunner) -> None:
+        for name, lesson in self.params.lesson_numbers().items():
+            self.reporter.add(runner.brain, f"Environment/Lesson Number/{name}", float(lesson),
+                              StatsAggregationMethod.MOST_RECENT)
+        self.reporter.set(runner.brain, "Step", float(runner.trainer.step))  # hidden from TensorBoard, a gauge
+        self.reporter.write(runner.brain, runner.next_summary, is_training=runner.training and not runner.done)
+
+    def summarize_partial(self) -> None:
+        """A stop before max_steps: the summary of the unfinished period now, under its label, so
+        the resumed run (which starts with the next period) neither repeats nor skips a label."""
+        for runner in self.runners.values():
+            period_start = runner.next_summary - runner.settings.summary_freq
+            if runner.training and not runner.done and runner.trainer.step > period_start:
+                logger.info("%s: summary of the unfinished period up to step %d, labelled %d.",
+                            runner.brain, runner.trainer.step, runner.next_summary)
+                self._summarize(runner)
                 runner.next_summary += runner.settings.summary_freq
 
     def _update_curriculum(self) -> None:
@@ -408,6 +438,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
                      make_routers(env.num_envs), env_vars)
     for line in params.describe():
         logger.info(line)
+    stopped = False
     try:
         pool.launch()
         # while the simulators boot: import torch and the networks (seconds, on a small machine)
@@ -442,17 +473,26 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
                 state.pending_reset = False
                 state.drop_trajectories()
                 results = pool.reset(state.drain_side_channels())
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # a stop signal (trainer.stop)
+        stopped = True
         logger.info("Learning was interrupted. Please wait while the graph is generated.")
     except UnityCommunicatorStoppedError:
         logger.info("The simulator closed the connection. Learning was interrupted. "
                     "Please wait while the graph is generated.")
     finally:
         state.progress.close()
+        # a stop signal also counts when the simulators, signalled with the trainer (scancel, a
+        # preemption), closed the connection before the trainer reached its next safe point
+        stopped = stopped or STOP.requested is not None
         try:
+            if stopped and not ck.inference:
+                state.summarize_partial()
             finish_run(state)
         finally:
             pool.close()
+    if stopped and not ck.inference and not state.finished:
+        logger.info("Stopped before max_steps (exit status %d); continue this run with --resume.", EXIT_STOPPED)
+        return EXIT_STOPPED
     return 0
 
 
@@ -463,9 +503,7 @@ def finish_run(state: RunState) -> None:
         if runner.training and runner.trainer.step > 0:
             runner.save_checkpoint(state.status, final=True)
     if not state.options.checkpoint_settings.inference:  # inference leaves the training record alone
-        for name, lesson in state.params.lesson_numbers().items():
-            state.status.set_lesson_num(name, lesson)
-        state.status.save(os.path.join(run_dir, "run_logs", "training_status.json"))
+        state.save_status()
     state.timers.write(os.path.join(run_dir, "run_logs", "timers.json"))
     state.reporter.close()
     write_run_options(state.options, run_dir)

@@ -1,7 +1,9 @@
 """Stop requests from signals, acted on at safe points of the training loop.
 
 SIGINT, SIGTERM, SIGQUIT and SIGUSR1 (what Slurm sends before a time limit) all ask the trainer
-to stop like Ctrl-C: finish the final checkpoint and ONNX, then exit 0. The handler only records
+to stop like Ctrl-C: finish the final checkpoint and ONNX, then exit with ``EXIT_STOPPED`` (75)
+when a behavior had not reached its max_steps yet, so a batch script knows to requeue the run
+(docs/cluster.md); 0 when training was complete anyway, or in --inference. The handler only records
 the request; the trainer raises ``GracefulStop`` itself where that is safe (between steps and
 while it waits for a simulator), never in the middle of a write, a lock or a half-read message.
 So a signal that lands while the final checkpoint is being written does not cut that write
@@ -15,6 +17,9 @@ import signal
 
 SIGNALS = ("SIGINT", "SIGTERM", "SIGQUIT", "SIGUSR1")
 HARD_STOP_AFTER = 3  # signals; the last one raises where it lands
+# Exit status of a run that a stop signal ended before max_steps, after its final checkpoint:
+# "unfinished, resume me". 75 is EX_TEMPFAIL of sysexits.h (a temporary failure; retry later).
+EXIT_STOPPED = 75
 
 
 class GracefulStop(KeyboardInterrupt):

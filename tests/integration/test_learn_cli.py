@@ -13,9 +13,11 @@ import subprocess
 import sys
 
 import pytest
+import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from tests.integration.conftest import free_port_block, learn, run_with_signals
+from trainer.stop import EXIT_STOPPED
 
 
 def scalars(folder):
@@ -283,9 +285,25 @@ def test_sigint_saves_a_checkpoint_and_onnx(tmp_path, basic_config, env_no_proxy
     # wait until training has produced at least one summary
     code, text = run_with_signals(_endless_basic(tmp_path, basic_config, "stop"), tmp_path, env_no_proxy,
                                   [("Basic. Step: 1000.", signal.SIGINT)])
-    assert code == 0, text
-    assert "Learning was interrupted" in text
-    _assert_final_save(tmp_path / "results" / "stop", 1000)
+    assert code == EXIT_STOPPED == 75, text  # unfinished: a batch script requeues on this status
+    assert "Learning was interrupted" in text and "continue this run with --resume" in text
+    run = tmp_path / "results" / "stop"
+    _assert_final_save(run, 1000)
+    # the stop summarised its unfinished period early (label: its end); the checkpoint says the
+    # resumed run continues with the next one
+    saved = json.loads((run / "run_logs/training_status.json").read_text())["Basic"]["final_checkpoint"]["steps"]
+    label = -(-saved // 1000) * 1000  # the end of the period holding the saved step
+    checkpoint = torch.load(run / "Basic" / "checkpoint.pt", weights_only=True)
+    assert int(checkpoint["Summaries"]["next_step"]) == label + 1000
+    r = learn([str(basic_config(max_steps=label + 1000, interval=10_000_000, summary=1000, name="more.yaml")),
+               "--env", "stub:basic", "--run-id", "stop", "--resume", "--results-dir", str(tmp_path / "results"),
+               "--base-port", str(free_port_block())], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert f"at step {saved}" in r.stdout
+    steps = [s for s, _ in scalars(run / "Basic")[0]["Environment/Episode Length"]]
+    # each summary step once: 1000 .. label from the first process (label only if an episode
+    # ended in its few steps), label + 1000 from the resumed one
+    assert steps in ([*range(1000, label, 1000), label + 1000], [*range(1000, label + 1, 1000), label + 1000]), steps
 
 
 def test_a_second_signal_during_the_final_save_loses_nothing(tmp_path, basic_config, env_no_proxy):
@@ -295,7 +313,7 @@ def test_a_second_signal_during_the_final_save_loses_nothing(tmp_path, basic_con
         _endless_basic(tmp_path, basic_config, "twice"), tmp_path, env_no_proxy,
         [("Basic. Step: 1000.", signal.SIGTERM),
          ("Learning was interrupted", signal.SIGTERM)])  # finish_run starts now: checkpoint, then ONNX
-    assert code == 0, text
+    assert code == EXIT_STOPPED, text
     assert "already stopping" in text
     _assert_final_save(tmp_path / "results" / "twice", 1000)
 
@@ -308,7 +326,7 @@ def test_sigterm_while_waiting_for_the_editor_stops_at_once(tmp_path, basic_conf
            "--timeout-wait", "600"]
     # the wait would otherwise last 600 s (60 s per poll)
     code, text = run_with_signals(cmd, tmp_path, env_no_proxy, [("Listening on port", signal.SIGTERM)], timeout=40)
-    assert code == 0, text
+    assert code == EXIT_STOPPED, text  # nothing trained yet: still unfinished
     assert "Traceback" not in text
 
 

@@ -178,3 +178,40 @@ def test_crc32c_and_tfrecord_framing_by_hand(tmp_path):
                           + masked_crc32c(first).to_bytes(4, "little"))
     loaded = list(EventFileLoader(events.path).Load())  # tensorboard's reader checks both CRCs
     assert [e.file_version for e in loaded] == ["brain.Event:2", ""] and loaded[1].step == 7
+
+
+def test_resume_from_drops_what_a_killed_run_wrote_after_its_checkpoint(tmp_path):
+    """A run killed at step 500 whose last checkpoint was at step 300: the resumed run writes
+    400 and 500 again. TensorBoard's own loader must show each step once, with the new values."""
+    killed = TensorboardWriter(tmp_path, wall_clock=lambda: 1000.0)
+    reporter = StatsReporter([killed])
+    for step in (100, 200, 300, 400, 500):
+        reporter.add("Ball", "Policy/Entropy", float(step))
+        reporter.write("Ball", step)
+    killed.close()  # as a SIGKILL leaves it: flushed after every write
+    resumed = TensorboardWriter(tmp_path, wall_clock=lambda: 2000.0)  # a later file
+    reporter = StatsReporter([resumed])
+    reporter.resume_from("Ball", 300)
+    for step in (400, 500, 600):
+        reporter.add("Ball", "Policy/Entropy", step + 0.5)
+        reporter.write("Ball", step)
+    resumed.close()
+    assert len(event_files(str(tmp_path / "Ball"))) == 2
+    curve = [(e.step, e.value) for e in load(str(tmp_path / "Ball")).Scalars("Policy/Entropy")]
+    assert curve == [(100, 100.0), (200, 200.0), (300, 300.0), (400, 400.5), (500, 500.5), (600, 600.5)]
+
+
+def test_resume_from_after_a_graceful_stop_drops_nothing(tmp_path):
+    first = TensorboardWriter(tmp_path, wall_clock=lambda: 1000.0)
+    reporter = StatsReporter([first])
+    for step in (100, 200):
+        reporter.add("Ball", "Policy/Entropy", float(step))
+        reporter.write("Ball", step)
+    first.close()
+    second = TensorboardWriter(tmp_path, wall_clock=lambda: 2000.0)
+    reporter = StatsReporter([second])
+    reporter.resume_from("Ball", 250)  # the final checkpoint came after the last summary
+    reporter.add("Ball", "Policy/Entropy", 300.0)
+    reporter.write("Ball", 300)
+    second.close()
+    assert [e.step for e in load(str(tmp_path / "Ball")).Scalars("Policy/Entropy")] == [100, 200, 300]

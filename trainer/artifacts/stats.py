@@ -317,6 +317,15 @@ class StatsReporter:
                 if hook is not None:
                     hook(brain, key, value)
 
+    def resume_from(self, brain: str, step: int) -> None:
+        """The brain resumed from a checkpoint at ``step``: writers that keep a history drop what
+        an earlier process wrote after it (``TensorboardWriter.resume_from``)."""
+        with self._lock:
+            for writer in self.writers:
+                hook = getattr(writer, "resume_from", None)
+                if hook is not None:
+                    hook(brain, int(step))
+
     def close(self) -> None:
         with self._lock:
             for writer in self.writers:

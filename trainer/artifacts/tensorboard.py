@@ -190,6 +190,17 @@ class TensorboardWriter(StatsWriter):
         if key == PROPERTY_HYPERPARAMETERS and isinstance(value, Mapping):
             self.write_text(brain, HYPERPARAMETERS_TAG, hyperparameters_markdown(value), 0)
 
+    def resume_from(self, brain: str, step: int) -> None:
+        """A SessionLog START event at ``step + 1``: TensorBoard then drops the events of earlier
+        files with a step above ``step`` (its purge of orphaned data). A run killed without
+        warning (SIGKILL, a node failure) wrote summaries after its last checkpoint; the resumed
+        run writes those steps again, and the curve must show them once. After a graceful stop
+        the checkpoint is the last step, so nothing is dropped."""
+        start = event_pb2.SessionLog(status=event_pb2.SessionLog.START)
+        self._writer(brain).add_event(event_pb2.Event(wall_time=self._wall_clock(), step=int(step) + 1,
+                                                      session_log=start))
+        self._writers[brain].flush()
+
     def flush(self) -> None:
         for writer in self._writers.values():
             writer.flush()
