@@ -46,3 +46,11 @@ def test_a_bad_value_names_the_variable_the_value_and_what_is_allowed(name, valu
     with pytest.raises(ConfigError) as error:
         EnvVars.from_environ({name: value})
     assert f"{name}={value!r}" in str(error.value) and allowed in str(error.value)
+
+
+def test_the_job_templates_variables_reach_the_trainer_without_being_refused():
+    """docker/slurm/train.sbatch reads MLAGENTS_LIKE_IMAGE / MLAGENTS_LIKE_VENV; sbatch exports the
+    submitter's environment into the job, so the trainer inside sees them and must not refuse."""
+    env = EnvVars.from_environ({"MLAGENTS_LIKE_IMAGE": "/images/mlagents-like.sif",
+                                "MLAGENTS_LIKE_VENV": "/home/me/mlagents-like/.venv"})
+    assert env == EnvVars()

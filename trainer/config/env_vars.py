@@ -8,7 +8,10 @@ module reads these variables. The stub launched by the trainer gets the choices 
 command-line flags (``--spin-wait-ms``, ``--transport``), never from the environment.
 
 An empty value counts as unset. A variable of the ``MLAGENTS_LIKE_`` family that is not one of these
-is refused too: a typo would otherwise be ignored without a word.
+is refused too: a typo would otherwise be ignored without a word. Two names belong to the Slurm job
+template (docker/slurm/train.sbatch, docs/cluster.md) and reach the trainer through the job's
+environment: ``MLAGENTS_LIKE_IMAGE`` (run inside that container image) and ``MLAGENTS_LIKE_VENV``
+(the venv to run); the trainer accepts and ignores them.
 
 =============================  ================  ====================================================
 variable                       field             default and meaning
@@ -42,6 +45,7 @@ SPIN_WAIT_MS = PREFIX + "SPIN_WAIT_MS"
 TRANSPORT = PREFIX + "TRANSPORT"
 NUMPY_UPDATE = PREFIX + "NUMPY_UPDATE"
 KNOWN = (TORCH_THREADS, BLAS_THREADS, SPIN_WAIT_MS, TRANSPORT, NUMPY_UPDATE)
+JOB_TEMPLATE_ONLY = (PREFIX + "IMAGE", PREFIX + "VENV")  # read by docker/slurm/train.sbatch only
 
 TRANSPORTS = ("http2", "grpcio")  # the gRPC transports of trainer/protocol/server.py
 DEFAULT_SPIN_WAIT_S = 1.0e-3
@@ -60,7 +64,8 @@ class EnvVars:
     @classmethod
     def from_environ(cls, environ: Mapping[str, str] = os.environ) -> "EnvVars":
         """The choices in ``environ``; ConfigError naming the first bad or unknown variable."""
-        unknown = sorted(name for name in environ if name.startswith(PREFIX) and name not in KNOWN)
+        unknown = sorted(name for name in environ if name.startswith(PREFIX)
+                         and name not in KNOWN and name not in JOB_TEMPLATE_ONLY)
         if unknown:
             raise ConfigError(f"{unknown[0]}={environ[unknown[0]]!r} is not a variable mlagents-like-learn "
                               f"knows; unset it (known: {', '.join(KNOWN)}).")
