@@ -3,10 +3,10 @@
 Pure encoders and decoders for both directions (trainer side and Unity side), so the trainer and
 ``unity_stub_env`` speak exactly the same bytes. Everything is little-endian.
 
-Framing and payload primitives (spec §4.1) live in ``side_channel_wire`` and are re-exported here,
+Framing and payload primitives (docs/protocol.md §4.1) live in ``side_channel_wire`` and are re-exported here,
 so this module is the one import site for both the trainer and ``unity_stub_env``.
 
-Channels (spec §4.2): engine configuration and environment parameters (trainer → Unity), float
+Channels (docs/protocol.md §4.2): engine configuration and environment parameters (trainer → Unity), float
 properties (both ways) and stats (Unity → trainer). The trainer sends no training analytics
 (the stub only recognises their channel id). Unknown channel ids are warned about once and skipped.
 """

@@ -1,4 +1,4 @@
-"""Samplers, seed offsets (§4.3) and lesson advancement (§6.7) with hand-computed numbers."""
+"""Samplers, seed offsets (docs/protocol.md §4.3) and lesson advancement (docs/configuration.md §6.7) with hand-computed numbers."""
 from __future__ import annotations
 
 import logging

@@ -1,4 +1,4 @@
-"""Simulator launching: executable lookup, argv order (spec §1.2), restart limits (§1.3), processes."""
+"""Simulator launching: executable lookup, argv order (docs/protocol.md §1.2), restart limits (docs/protocol.md §1.3), processes."""
 from __future__ import annotations
 
 import os

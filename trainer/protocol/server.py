@@ -1,4 +1,4 @@
-"""The gRPC server end of ONE simulator connection (spec §1).
+"""The gRPC server end of ONE simulator connection (docs/protocol.md §1).
 
 The simulator (Unity or unity-stub-env) is the gRPC client: every message it sends is the request
 of an ``Exchange`` call, and the trainer's next message is that call's response. Two transports
