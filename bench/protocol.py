@@ -38,7 +38,8 @@ sys.path.insert(0, str(REPO))
 from trainer.envs.cpus import spin_budget  # noqa: E402
 from trainer.protocol.server import UnityEndpoint  # noqa: E402
 from unity_stub_env import make_task  # noqa: E402
-from unity_stub_env.launcher import spin_wait_args, write_player_launcher  # noqa: E402
+from trainer.config.env_vars import EnvVars  # noqa: E402
+from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher  # noqa: E402
 
 INTEROP_PYTHON = REPO / ".venv-interop" / "bin" / "python"
 PEER = Path(__file__).resolve().parent / "peers" / "mlagents_envs_rollout.py"
@@ -46,8 +47,14 @@ OUT = Path(__file__).resolve().parent / "out"
 AGENTS_PER_AREA = {"basic": 1, "ball3d": 12}
 # as mlagents-like-learn decides for one simulator; the stub gets the same flag under
 # mlagents_envs (ii), so both trainers face the same simulator
-SPIN_WAIT = spin_budget(2)
+SPIN_WAIT = spin_budget(2, EnvVars.from_environ().spin_wait_s)
 STUB_FLAGS = spin_wait_args(SPIN_WAIT)
+
+
+def transport() -> str:
+    """MLAGENTS_LIKE_TRANSPORT as a run would read it, at each call (bench/transport.py sets it
+    between runs): the endpoint's server and, by flag, the stub's client."""
+    return EnvVars.from_environ().transport
 
 
 def free_port() -> int:
@@ -67,7 +74,7 @@ def launch_stub(task: str, port: int, num_areas: int, profile_to: Path | None = 
         command += [str(Path(__file__).parent / "peers" / "timed_stub.py"), str(physics_to)]
     else:
         command += ["-m", "unity_stub_env.cli"]
-    command += ["--task", task, *STUB_FLAGS, "--mlagents-port", str(port),
+    command += ["--task", task, *STUB_FLAGS, *transport_args(transport()), "--mlagents-port", str(port),
                 "--num-areas", str(num_areas), "-nographics", "-batchmode", "-logFile", os.devnull]
     return subprocess.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
@@ -76,7 +83,8 @@ def bench_endpoint(task: str, num_areas: int, warmup: int, exchanges: int,
                    profile: bool = False, stub_profile: Path | None = None) -> dict:
     """(i): UnityEndpoint ⇄ stub process, zero-cost actions. Returns timing and counts."""
     port = free_port()
-    endpoint = UnityEndpoint(port=port, timeout_wait=60.0, spin_wait=SPIN_WAIT)
+    endpoint = UnityEndpoint(port=port, timeout_wait=60.0, spin_wait=SPIN_WAIT,
+                             transport=transport())
     endpoint.start()
     physics_file = Path(tempfile.mkstemp(prefix="stub_physics_", suffix=".json")[1])
     stub = launch_stub(task, port, num_areas, stub_profile, None if stub_profile else physics_file)
@@ -121,7 +129,7 @@ def bench_mlagents_envs(task: str, num_areas: int, warmup: int, exchanges: int) 
     if not INTEROP_PYTHON.exists():
         return None
     with tempfile.TemporaryDirectory() as folder:
-        exe = write_player_launcher(folder, [task], extra_args=STUB_FLAGS)
+        exe = write_player_launcher(folder, [task], extra_args=STUB_FLAGS + transport_args(transport()))
         options = {"file_name": str(exe.with_suffix("")), "base_port": free_port(),
                    "num_areas": num_areas, "warmup": warmup, "exchanges": exchanges}
         env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}

@@ -56,8 +56,9 @@ from pathlib import Path
 
 import yaml
 
+from trainer.config.env_vars import EnvVars
 from trainer.envs.cpus import spin_budget
-from unity_stub_env.launcher import spin_wait_args, write_player_launcher
+from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 REPO = Path(__file__).resolve().parents[1]
@@ -89,7 +90,10 @@ def free_port() -> int:
 def stub_launcher(folder: Path, task: str) -> Path:
     """``folder/Stub<Task>.x86_64``: a Unity-build-like shell launcher of the stub (our venv's Python)."""
     # the stub polls as mlagents-like-learn would have it poll for --num-envs 1 (trainer/envs/pool.py)
-    return write_player_launcher(folder, [task], python=str(OUR_PYTHON), extra_args=spin_wait_args(spin_budget(2)))
+    env_vars = EnvVars.from_environ()
+    return write_player_launcher(folder, [task], python=str(OUR_PYTHON),
+                                 extra_args=spin_wait_args(spin_budget(2, env_vars.spin_wait_s))
+                                 + transport_args(env_vars.transport))
 
 
 def write_bench_config(source: Path, target: Path, max_steps: int | None) -> dict:

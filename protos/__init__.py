@@ -5,8 +5,7 @@
 * ``types``          — BehaviorSpec, ObservationSpec, ActionSpec, ActionTuple, DecisionSteps, ...
 * ``wire``           — protobuf field writers (varints, tags, length prefixes, rows of records)
 * ``records``        — the fast reader of many equal-layout records (agent infos, agent actions)
-* ``side_channels``  — the ``side_channel`` bytes (framing in ``side_channel_wire``, analytics
-  payloads in ``training_analytics``)
+* ``side_channels``  — the ``side_channel`` bytes (framing in ``side_channel_wire``)
 * ``http2``, ``pacing`` — the single-threaded HTTP/2 gRPC server and client, and when they poll
 * ``errors``         — ``ProtocolError``, raised on bytes the protocol does not allow
 

@@ -1,4 +1,4 @@
-"""Side channel wire format: message framing and little-endian payload primitives (spec §4.1).
+"""Side channel wire format: message framing and little-endian payload primitives (docs/protocol.md §4.1).
 
 Framing: the ``side_channel`` field is a concatenation of messages, each
 ``16 bytes channel UUID (uuid.bytes_le, .NET Guid order) | int32 payload length n | n bytes payload``.
@@ -72,10 +72,6 @@ class PayloadWriter:
     def __init__(self) -> None:
         self._parts: list[bytes] = []
 
-    def write_bool(self, value: bool) -> "PayloadWriter":
-        self._parts.append(struct.pack("<?", bool(value)))
-        return self
-
     def write_int32(self, value: int) -> "PayloadWriter":
         self._parts.append(struct.pack("<i", int(value)))
         return self
@@ -100,10 +96,6 @@ class PayloadWriter:
         floats = np.asarray(list(values), dtype="<f4")
         self._parts.append(struct.pack("<i", len(floats)))
         self._parts.append(floats.tobytes())
-        return self
-
-    def write_raw_bytes(self, data: bytes) -> "PayloadWriter":
-        self._parts.append(bytes(data))
         return self
 
     def getvalue(self) -> bytes:
@@ -132,9 +124,6 @@ class PayloadReader:
         self._offset += size
         return chunk
 
-    def read_bool(self) -> bool:
-        return self._take(1, "a bool")[0] != 0
-
     def read_int32(self) -> int:
         return struct.unpack("<i", self._take(4, "an int32"))[0]
 
@@ -153,6 +142,3 @@ class PayloadReader:
         count = self.read_int32()
         raw = self._take(4 * count, f"a list of {count} float32")
         return [float(v) for v in np.frombuffer(raw, dtype="<f4")]
-
-    def read_raw_bytes(self) -> bytes:
-        return self._take(self.remaining, "the rest")

@@ -3,12 +3,12 @@
 Pure encoders and decoders for both directions (trainer side and Unity side), so the trainer and
 ``unity_stub_env`` speak exactly the same bytes. Everything is little-endian.
 
-Framing and payload primitives (spec §4.1) live in ``side_channel_wire`` and are re-exported here,
+Framing and payload primitives (docs/protocol.md §4.1) live in ``side_channel_wire`` and are re-exported here,
 so this module is the one import site for both the trainer and ``unity_stub_env``.
 
-Channels (spec §4.2): engine configuration and environment parameters (trainer → Unity), float
-properties (both ways), stats (Unity → trainer) and training analytics (trainer → Unity, see
-``protos.training_analytics``). Unknown channel ids are warned about once and skipped.
+Channels (docs/protocol.md §4.2): engine configuration and environment parameters (trainer → Unity), float
+properties (both ways) and stats (Unity → trainer). The trainer sends no training analytics
+(the stub only recognises their channel id). Unknown channel ids are warned about once and skipped.
 """
 from __future__ import annotations
 
@@ -26,11 +26,6 @@ from protos.side_channel_wire import (  # re-exported: framing and primitives
     PayloadWriter,
     pack_messages,
     unpack_messages,
-)
-from protos.training_analytics import (  # re-exported: one import site for channels
-    encode_training_behavior_initialized,
-    encode_training_environment_initialized,
-    hash_for_analytics,
 )
 from protos.types import StatsAggregationMethod
 
@@ -227,13 +222,11 @@ def decode_stat(payload: bytes) -> tuple[str, float, StatsAggregationMethod]:
 class IncomingSideChannelData:
     """What Unity sent in one message's side channel field, decoded.
 
-    stats: (key, value, aggregation) in wire order; float_properties: last value per key;
-    raw: payloads per registered raw channel id, in wire order.
+    stats: (key, value, aggregation) in wire order; float_properties: last value per key.
     """
 
     stats: list[tuple[str, float, StatsAggregationMethod]] = field(default_factory=list)
     float_properties: dict[str, float] = field(default_factory=dict)
-    raw: dict[uuid.UUID, list[bytes]] = field(default_factory=dict)
 
 
 class SideChannelRouter:
@@ -245,7 +238,6 @@ class SideChannelRouter:
 
     def __init__(self, warned_ids: set[uuid.UUID] | None = None) -> None:
         self._outgoing: list[tuple[uuid.UUID, bytes]] = []
-        self._raw_callbacks: dict[uuid.UUID, Callable[[bytes], None] | None] = {}
         self._warned_ids: set[uuid.UUID] = set() if warned_ids is None else warned_ids
 
     def queue(self, channel_id: uuid.UUID, payload: bytes) -> None:
@@ -258,13 +250,6 @@ class SideChannelRouter:
         self._outgoing = []
         return data
 
-    def register_raw(self, channel_id: uuid.UUID, callback: Callable[[bytes], None] | None = None) -> None:
-        """Accept raw messages on ``channel_id``: each payload goes to ``callback`` (if given) and
-        into ``IncomingSideChannelData.raw``."""
-        if channel_id in (STATS_CHANNEL_ID, FLOAT_PROPERTIES_CHANNEL_ID):
-            raise ValueError(f"Channel {channel_id} is built in and cannot be registered as raw.")
-        self._raw_callbacks[channel_id] = callback
-
     def dispatch(self, data: bytes) -> IncomingSideChannelData:
         """Decode a Unity → trainer ``side_channel`` field. Unknown ids are warned once and skipped."""
         incoming = IncomingSideChannelData()
@@ -274,17 +259,11 @@ class SideChannelRouter:
             elif channel_id == FLOAT_PROPERTIES_CHANNEL_ID:
                 key, value = decode_float_property(payload)
                 incoming.float_properties[key] = value
-            elif channel_id in self._raw_callbacks:
-                incoming.raw.setdefault(channel_id, []).append(payload)
-                callback = self._raw_callbacks[channel_id]
-                if callback is not None:
-                    callback(payload)
             elif channel_id not in self._warned_ids:
                 self._warned_ids.add(channel_id)
                 logger.warning(
-                    "Unknown side channel id %s sent by the simulator; its messages are ignored. "
-                    "If the Unity project registers a custom side channel, register it on the "
-                    "trainer too.",
+                    "Unknown side channel id %s sent by the simulator; its messages are ignored "
+                    "(mlagents-like-learn has no custom side channels).",
                     channel_id,
                 )
         return incoming
@@ -296,7 +275,6 @@ __all__ = [
     "PayloadWriter", "PayloadReader", "EngineConfigType", "encode_engine_config",
     "decode_engine_config", "SAMPLER_TYPES", "encode_env_float", "encode_env_sampler",
     "EnvParameter", "decode_env_parameter", "encode_float_property", "decode_float_property",
-    "encode_stat", "decode_stat", "encode_training_environment_initialized",
-    "encode_training_behavior_initialized", "hash_for_analytics", "IncomingSideChannelData",
+    "encode_stat", "decode_stat", "IncomingSideChannelData",
     "SideChannelRouter",
 ]

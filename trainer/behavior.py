@@ -100,8 +100,10 @@ class BehaviorRunner:
 
     @classmethod
     def create(cls, brain: str, spec: BehaviorSpec, settings, run_dir: str, seed: int, device: str,
-               training: bool) -> "BehaviorRunner":
-        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device)
+               training: bool, use_numpy_update: bool = True) -> "BehaviorRunner":
+        """``use_numpy_update``: MLAGENTS_LIKE_NUMPY_UPDATE (trainer.config.env_vars)."""
+        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
+                             use_numpy_update=use_numpy_update)
         runner = cls(brain, spec, settings, trainer, CheckpointPaths(run_dir, brain), training)
         os.makedirs(runner.paths.folder, exist_ok=True)
         return runner

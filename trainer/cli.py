@@ -21,23 +21,32 @@ LOGO = r"""
 logger = logging.getLogger("mlagents_like")
 
 
-BLAS_THREADS_ENV = "MLAGENTS_LIKE_BLAS_THREADS"
 _USER_BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
-def limit_blas_threads(environ=os.environ) -> None:
-    """One BLAS thread for numpy unless MLAGENTS_LIKE_BLAS_THREADS (or the user's own
-    OPENBLAS_NUM_THREADS / OMP_NUM_THREADS / MKL_NUM_THREADS) says otherwise. Must run before
-    numpy is imported. The trainer's matrices are small (a batch of 64 through 128 units):
+def limit_blas_threads(blas_threads: int | None, environ=os.environ) -> None:
+    """One BLAS thread for numpy unless MLAGENTS_LIKE_BLAS_THREADS (``blas_threads``) or the
+    user's own OPENBLAS_NUM_THREADS / OMP_NUM_THREADS / MKL_NUM_THREADS says otherwise. Must run
+    before numpy is imported. The trainer's matrices are small (a batch of 64 through 128 units):
     OpenBLAS's extra thread does not speed them up, but it busy-waits after every call: in a
     60k-step ball3d run the trainer used 36-38 CPU-seconds with two threads, 24 with one, and
     the difference is taken from the simulators, which share the cores."""
-    threads = environ.get(BLAS_THREADS_ENV)
-    if threads is None and any(var in environ for var in _USER_BLAS_VARS):
+    if blas_threads is None and any(var in environ for var in _USER_BLAS_VARS):
         return
-    threads = str(max(1, int(threads))) if threads and threads.strip().isdigit() else "1"
+    threads = str(blas_threads or 1)
     environ["OPENBLAS_NUM_THREADS"] = threads
     environ["MKL_NUM_THREADS"] = threads
+
+
+def read_environment(environ=os.environ):
+    """The run's MLAGENTS_LIKE_* choices (trainer.config.env_vars), with numpy's BLAS threads
+    limited accordingly: the first thing ``main`` does, before numpy is imported. ConfigError
+    for a bad value."""
+    from trainer.config.env_vars import EnvVars
+
+    env_vars = EnvVars.from_environ(environ)
+    limit_blas_threads(env_vars.blas_threads, environ)
+    return env_vars
 
 
 def setup_logging(debug: bool) -> None:
@@ -76,22 +85,19 @@ def version_lines() -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    limit_blas_threads()
     debug = "--debug" in argv
     setup_logging(debug)
     from protos.errors import ProtocolError
     from trainer.errors import UserError
 
     try:
+        env_vars = read_environment()  # before the flags: it must limit BLAS before numpy loads
         from trainer.config.cli_args import parse_run_options
 
         options = parse_run_options(argv)
         from trainer.config.support import check_supported
 
         check_supported(options)  # before the results folder or a simulator exists
-        from trainer.envs.cpus import configured_spin
-
-        configured_spin()  # a bad MLAGENTS_LIKE_SPIN_WAIT_MS is refused before the results folder exists
         print(LOGO)
         for line in version_lines():
             logger.info(line)
@@ -100,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
         STOP.install()
         from trainer.run import run_training
 
-        return run_training(options)
+        return run_training(options, env_vars)
     except (UserError, ProtocolError) as err:
         if debug:
             logger.exception("error")

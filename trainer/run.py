@@ -29,10 +29,11 @@ from trainer.artifacts.tensorboard import TensorboardWriter
 from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
 from trainer.config.env_params import ConstantSampler
+from trainer.config.env_vars import EnvVars
 from trainer.config.loader import write_run_options
-from trainer.config.param_manager import EnvironmentParameterManager
 from trainer.config.settings import settings_as_dict
 from trainer.config.support import goal_conditioning_note
+from trainer.curriculum import EnvironmentParameterManager
 from trainer.envs.pool import EnvPool, PoolSettings
 from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
 from trainer.rollout import AgentTracker, concat_masks
@@ -118,6 +119,7 @@ class RunState:
     timers: TimerTree
     progress: ProgressLine
     routers: list[sc.SideChannelRouter]
+    env_vars: EnvVars = field(default_factory=EnvVars)
     runners: dict[str, BehaviorRunner] = field(default_factory=dict)
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
     pending_reset: bool = False
@@ -146,7 +148,8 @@ class RunState:
         ck = opts.checkpoint_settings
         seed = opts.env_settings.seed + len(self.runners)
         runner = BehaviorRunner.create(brain, spec, settings, self.run_dir, seed,
-                                       opts.torch_settings.device or "cpu", training=not ck.inference)
+                                       opts.torch_settings.device or "cpu", training=not ck.inference,
+                                       use_numpy_update=self.env_vars.numpy_update)
         if ck.resume or (ck.inference and os.path.isfile(runner.paths.latest)):
             runner.restore(runner.paths.latest, reset_step=False)
         elif settings.init_path:
@@ -371,14 +374,14 @@ def make_routers(num_envs: int) -> list[sc.SideChannelRouter]:
     return [sc.SideChannelRouter(warned) for _ in range(num_envs)]
 
 
-def configure_torch_threads() -> None:
-    """One intra-op thread unless MLAGENTS_LIKE_TORCH_THREADS says otherwise: the simulators run
-    in other processes on the same cores, and for the small networks RL uses, torch's thread
-    pool costs more in hand-offs than it gains (measured: act for 256 agents 3.2 ms with 2
-    threads, 0.8 ms with 1 on a 2-core machine)."""
+def configure_torch_threads(threads: int) -> None:
+    """``threads`` intra-op threads: one unless MLAGENTS_LIKE_TORCH_THREADS says otherwise. The
+    simulators run in other processes on the same cores, and for the small networks RL uses,
+    torch's thread pool costs more in hand-offs than it gains (measured: act for 256 agents
+    3.2 ms with 2 threads, 0.8 ms with 1 on a 2-core machine)."""
     import torch
 
-    torch.set_num_threads(max(1, int(os.environ.get("MLAGENTS_LIKE_TORCH_THREADS", "1"))))
+    torch.set_num_threads(threads)
 
 
 def check_torch_device(device: str | None) -> None:
@@ -399,8 +402,10 @@ def check_torch_device(device: str | None) -> None:
         ) from error
 
 
-def run_training(options) -> int:
-    """Train (or run inference) as configured. Returns the process exit code."""
+def run_training(options, env_vars: EnvVars | None = None) -> int:
+    """Train (or run inference) as configured; ``env_vars``: the MLAGENTS_LIKE_* choices read at
+    start (trainer/cli.py; the defaults if None). Returns the process exit code."""
+    env_vars = env_vars or EnvVars()
     ck = options.checkpoint_settings
     env = options.env_settings
     pool_settings = PoolSettings(
@@ -411,6 +416,7 @@ def run_training(options) -> int:
         log_folder=os.path.abspath(os.path.join(run_dir_of(options), "run_logs")),
         max_lifetime_restarts=env.max_lifetime_restarts, restarts_rate_limit_n=env.restarts_rate_limit_n,
         restarts_rate_limit_period_s=env.restarts_rate_limit_period_s, debug=options.debug,
+        spin_wait_s=env_vars.spin_wait_s, transport=env_vars.transport,
     )
     state: RunState | None = None
     # resolves --env first: a wrong path must not leave a results folder that blocks the rerun
@@ -429,14 +435,14 @@ def run_training(options) -> int:
     reporter = StatsReporter([tb, ConsoleWriter(logger, progress=progress), GaugeWriter(timers)])
     write_run_options(options, run_dir)
     state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
-                     make_routers(env.num_envs))
+                     make_routers(env.num_envs), env_vars)
     for line in params.describe():
         logger.info(line)
     stopped = False
     try:
         pool.launch()
         # while the simulators boot: import torch and the networks (seconds, on a small machine)
-        configure_torch_threads()
+        configure_torch_threads(env_vars.torch_threads)
         check_torch_device(options.torch_settings.device)
         import trainer.behavior  # noqa: F401
         STOP.check()

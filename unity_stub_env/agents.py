@@ -19,7 +19,7 @@ from protos.communicator_objects import (
 from protos.types import ActionSpec, ObservationSpec
 
 
-# AgentInfoProto fields (spec §2) in number order: reward 7 (float), done 8, max_step_reached 9,
+# AgentInfoProto fields (docs/protocol.md §2) in number order: reward 7 (float), done 8, max_step_reached 9,
 # id 10 (varints), action_mask 11 (packed bools), observations 13
 _REWARD, _ID = wire.tag(7, wire.I32), wire.tag(10, wire.VARINT)
 _DONE_TRUE, _MAX_STEP_TRUE = wire.tag(8, wire.VARINT) + b"\x01", wire.tag(9, wire.VARINT) + b"\x01"

@@ -2,12 +2,15 @@
 
     unity-stub-env --task NAME --mlagents-port P [-nographics] [-batchmode] [-logFile F]
                    [--num-areas N] [--seed S] [--decision-period K] [--connect-timeout T]
+                   [--spin-wait-ms MS] [--transport {http2,grpcio}]
     unity-stub-env --list
     unity-stub-env --task dodge --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
 --connect-timeout, an incompatible trainer or a protocol error; 2 bad command line.
+
+The stub reads no environment variable: mlagents-like-learn passes its choices as flags.
 """
 from __future__ import annotations
 
@@ -20,8 +23,8 @@ import sys
 
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter, build_brain_parameters
-from unity_stub_env.communicator import RpcCommunicator, SessionEnd, SideChannelState, encode_stats
-from unity_stub_env.launcher import spin_wait_args, write_player_launcher
+from unity_stub_env.communicator import TRANSPORTS, RpcCommunicator, SessionEnd, SideChannelState, encode_stats
+from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher
 from unity_stub_env.tasks import TASKS, EnvironmentParameters, make_task
 
 logger = logging.getLogger("unity_stub_env")
@@ -49,6 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="poll for the trainer's answer up to MS ms past when it is due instead of "
                              "sleeping through it (saves the wake-up on a machine with a CPU to spare; "
                              "mlagents-like-learn passes it when it does; default 0 = always sleep)")
+    parser.add_argument("--transport", choices=TRANSPORTS, default="http2",
+                        help="the gRPC client: http2 (the stub's own, single-threaded; default) or grpcio "
+                             "(mlagents-like-learn passes the transport its server uses)")
     parser.add_argument("--list", action="store_true", help="list the tasks with their specs and exit")
     parser.add_argument("--evaluate", action="append", metavar="POLICY", default=None,
                         help="run --task's scripted evaluation (no trainer) with POLICY: a trained .onnx, "
@@ -113,7 +119,8 @@ def main(argv: list[str] | None = None) -> int:
 
         return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path)
     if args.write_launcher is not None:
-        path = write_player_launcher(args.write_launcher, args.tasks, extra_args=spin_wait_args(args.spin_wait_ms / 1e3))
+        path = write_player_launcher(args.write_launcher, args.tasks,
+                                     extra_args=spin_wait_args(args.spin_wait_ms / 1e3) + transport_args(args.transport))
         print(f"{path}  (use --env {path.with_suffix('')})")
         return 0
     if args.mlagents_port is None:
@@ -123,7 +130,10 @@ def main(argv: list[str] | None = None) -> int:
     _configure_logging(args.log_file)
     if unknown:
         logger.info("Ignoring unknown flags: %s", " ".join(unknown))
-    communicator = RpcCommunicator(args.mlagents_port, args.connect_timeout, args.spin_wait_ms / 1e3)
+    logger.info("Trainer port %d, %s client, polling up to %g ms for its answers", args.mlagents_port,
+                args.transport, args.spin_wait_ms)
+    communicator = RpcCommunicator(args.mlagents_port, args.connect_timeout, args.spin_wait_ms / 1e3,
+                                   args.transport)
     signal.signal(signal.SIGTERM, communicator.request_stop)
     signal.signal(signal.SIGINT, communicator.request_stop)
     try:

@@ -1,6 +1,6 @@
 """The gRPC side of a Unity player: a CLIENT that calls ``Exchange`` like ``RpcCommunicator.cs``.
 
-Handshake (spec 1.5): M1 carries the academy's init output (no brain parameters, no rl_output);
+Handshake (docs/protocol.md §1.5): M1 carries the academy's init output (no brain parameters, no rl_output);
 the answer holds the trainer's seed, num_areas and versions. M2 is a bare status-200 header;
 its answer is the first RESET. Every later message carries ``rl_output`` (agent infos keyed by
 ``Behavior?team=0`` plus side-channel bytes) and, the first time a behavior is sent with at
@@ -10,7 +10,6 @@ session; ``request_stop`` (SIGTERM/SIGINT) makes the next wait send one status-4
 from __future__ import annotations
 
 import logging
-import os
 import signal
 import threading
 import time
@@ -22,7 +21,6 @@ from protos import side_channels as sc
 from protos import wire
 from protos.communicator_objects import (
     header_pb2,
-    unity_input_pb2,
     unity_message_pb2,
     unity_output_pb2,
     unity_rl_initialization_output_pb2,
@@ -77,7 +75,7 @@ EXCHANGE_PATH = "/communicator_objects.UnityToExternalProto/Exchange"
 
 
 class _GrpcioChannel:
-    """grpcio's client with raw bytes (MLAGENTS_LIKE_TRANSPORT=grpcio); same calls as Http2Channel."""
+    """grpcio's client with raw bytes (``--transport grpcio``); same calls as Http2Channel."""
 
     def __init__(self, host: str, port: int) -> None:
         import grpc  # only for this transport: ~0.1 s of the default stub's start-up otherwise
@@ -107,9 +105,15 @@ class _GrpcioChannel:
         self._channel.close()
 
 
-def _open_channel(port: int, spin_s: float = 0.0):
-    """The stub's gRPC client: our blocking HTTP/2 one (no threads; default) or grpcio's."""
-    if os.environ.get("MLAGENTS_LIKE_TRANSPORT", "").strip().lower() == "grpcio":
+TRANSPORTS = ("http2", "grpcio")
+
+
+def _open_channel(port: int, spin_s: float = 0.0, transport: str = "http2"):
+    """The stub's gRPC client (one of TRANSPORTS): our blocking HTTP/2 one (no threads; default)
+    or grpcio's."""
+    if transport not in TRANSPORTS:
+        raise ValueError(f"unknown transport {transport!r}; use one of {', '.join(TRANSPORTS)}")
+    if transport == "grpcio":
         return _GrpcioChannel("localhost", port)
     return Http2Channel("localhost", port, EXCHANGE_PATH.encode(), spin_s)
 
@@ -125,11 +129,13 @@ def _abort_exchange(*_args) -> None:
 class RpcCommunicator:
     """One connection to a trainer at ``localhost:port``; Unity is the caller of every RPC."""
 
-    def __init__(self, port: int, connect_timeout: float = 60.0, spin_wait: float = 0.0) -> None:
+    def __init__(self, port: int, connect_timeout: float = 60.0, spin_wait: float = 0.0,
+                 transport: str = "http2") -> None:
         self.address = f"localhost:{port}"
         self.port = port
         self.connect_timeout = float(connect_timeout)
         self.spin_wait = float(spin_wait)  # s; see protos/pacing.py
+        self.transport = transport  # one of TRANSPORTS
         self.stop_requested = False
         self._channel = None
         self._sent_brain_keys: set[str] = set()
@@ -145,7 +151,7 @@ class RpcCommunicator:
     # Connection and handshake ---------------------------------------------------------------
     def connect(self) -> None:
         """Open the channel, retrying until ``connect_timeout``; SessionEnd(exit 1) if it fails."""
-        self._channel = _open_channel(self.port, self.spin_wait)
+        self._channel = _open_channel(self.port, self.spin_wait, self.transport)
         deadline = time.monotonic() + self.connect_timeout
         while True:
             started = time.monotonic()

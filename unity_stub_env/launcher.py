@@ -28,6 +28,13 @@ def spin_wait_args(spin_s: float) -> list[str]:
     return ["--spin-wait-ms", f"{spin_s * 1e3:g}"] if spin_s > 0 else []
 
 
+def transport_args(transport: str) -> list[str]:
+    """The stub's command-line arguments for its gRPC client ``transport`` (none for the default,
+    http2): how mlagents-like-learn passes MLAGENTS_LIKE_TRANSPORT on (the stub reads no
+    environment variable)."""
+    return ["--transport", transport] if transport != "http2" else []
+
+
 def write_player_launcher(folder: str | Path, tasks: list[str], python: str | None = None,
                           extra_args: list[str] | None = None) -> Path:
     """Write ``folder/<player_name>.x86_64`` (executable) and return its path; ``extra_args``

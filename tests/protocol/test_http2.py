@@ -156,10 +156,9 @@ def test_pings_are_acknowledged_and_settings_acked():
 
 
 @pytest.mark.parametrize("server_transport", ["http2", "grpcio"])
-def test_garbled_message_is_a_protocol_error_and_the_client_is_told(monkeypatch, server_transport):
-    monkeypatch.setenv("MLAGENTS_LIKE_TRANSPORT", server_transport)
+def test_garbled_message_is_a_protocol_error_and_the_client_is_told(server_transport):
     port = free_port()
-    endpoint = UnityEndpoint(port, timeout_wait=10.0)
+    endpoint = UnityEndpoint(port, timeout_wait=10.0, transport=server_transport)
     endpoint.start()
     outcome: dict = {}
 
@@ -181,11 +180,10 @@ def test_garbled_message_is_a_protocol_error_and_the_client_is_told(monkeypatch,
         endpoint.close()
 
 
-def test_handshake_over_http2_with_a_grpc_stub_client(monkeypatch):
+def test_handshake_over_http2_with_a_grpc_stub_client():
     """M1 → init input; M2 stays pending until close() answers it with status 400."""
-    monkeypatch.setenv("MLAGENTS_LIKE_TRANSPORT", "http2")
     port = free_port()
-    endpoint = UnityEndpoint(port, timeout_wait=10.0)
+    endpoint = UnityEndpoint(port, timeout_wait=10.0, transport="http2")
     endpoint.start()
     answers: list = []
 

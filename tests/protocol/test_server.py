@@ -28,21 +28,20 @@ from trainer.errors import (
     UnityTimeOutError,
     UnityVersionError,
 )
-from trainer.protocol.server import TRANSPORT_ENV, TRANSPORTS, UnityEndpoint
+from trainer.protocol.server import TRANSPORTS, UnityEndpoint
 
 pytestmark = pytest.mark.timeout(60)
 
 
 @pytest.fixture(params=TRANSPORTS, autouse=True)
-def transport(request, monkeypatch):
+def transport(request):
     """Every test runs against both server transports (our HTTP/2 one and grpcio's)."""
-    monkeypatch.setenv(TRANSPORT_ENV, request.param)
     return request.param
 
 
 @pytest.fixture
 def endpoint(port, transport):
-    ep = UnityEndpoint(port, timeout_wait=10.0)
+    ep = UnityEndpoint(port, transport=transport, timeout_wait=10.0)
     ep.start()
     yield ep
     ep.close()
@@ -145,8 +144,8 @@ def test_wrong_version_raises_and_close_answers_400(endpoint, port):
     assert unity.responses[0].header.status == 400
 
 
-def test_client_that_never_connects_times_out(port):
-    with UnityEndpoint(port, timeout_wait=0.5, describe="env 0") as ep:
+def test_client_that_never_connects_times_out(port, transport):
+    with UnityEndpoint(port, transport=transport, timeout_wait=0.5, describe="env 0") as ep:
         ep.start()
         with pytest.raises(UnityTimeOutError) as err:
             ep.handshake(0, 1)
@@ -155,9 +154,9 @@ def test_client_that_never_connects_times_out(port):
 
 
 @pytest.mark.parametrize("alive_answers", [[False], [True, True, True, False]])
-def test_dead_simulator_process_is_reported(port, alive_answers):
+def test_dead_simulator_process_is_reported(port, alive_answers, transport):
     answers = iter(alive_answers)  # runs out (StopIteration) if polled after reporting death
-    with UnityEndpoint(port, timeout_wait=1.0, is_alive=lambda: next(answers)) as ep:
+    with UnityEndpoint(port, transport=transport, timeout_wait=1.0, is_alive=lambda: next(answers)) as ep:
         ep.start()
         with pytest.raises(SimulatorExitedError, match=str(port)):
             ep.handshake(0, 1)
@@ -175,26 +174,26 @@ def test_unity_status_400_stops_the_communicator(endpoint, port):
     assert unity.responses[-1].header.status == 400
 
 
-def test_close_is_idempotent_and_never_blocks_without_a_client(port):
-    ep = UnityEndpoint(port, timeout_wait=1.0)
+def test_close_is_idempotent_and_never_blocks_without_a_client(port, transport):
+    ep = UnityEndpoint(port, transport=transport, timeout_wait=1.0)
     ep.start()
     ep.close()
     ep.close()
     # the port is free again
-    again = UnityEndpoint(port)
+    again = UnityEndpoint(port, transport=transport)
     again.start()
     again.close()
 
 
-def test_port_in_use_is_reported(endpoint, port):
-    second = UnityEndpoint(port)
+def test_port_in_use_is_reported(endpoint, port, transport):
+    second = UnityEndpoint(port, transport=transport)
     with pytest.raises(PortInUseError, match=rf"{port}.*--base-port"):
         second.start()
     second.close()
 
 
-def test_grpc_refuses_a_second_server_on_the_port_even_without_the_pre_check(endpoint, port, monkeypatch):
-    second = UnityEndpoint(port)
+def test_grpc_refuses_a_second_server_on_the_port_even_without_the_pre_check(endpoint, port, monkeypatch, transport):
+    second = UnityEndpoint(port, transport=transport)
     monkeypatch.setattr(second, "_check_port_free", lambda: None)
     with pytest.raises(PortInUseError, match=str(port)):
         second.start()
@@ -211,12 +210,12 @@ def test_missing_base_capabilities_only_warn(endpoint, port, caplog):
     assert unity.responses[1].header.status == 400
 
 
-def test_port_held_by_a_plain_socket_is_reported():
+def test_port_held_by_a_plain_socket_is_reported(transport):
     with socket.socket() as holder:
         holder.bind(("127.0.0.1", 0))
         holder.listen()
         with pytest.raises(PortInUseError):
-            UnityEndpoint(holder.getsockname()[1]).start()
+            UnityEndpoint(holder.getsockname()[1], transport=transport).start()
 
 
 def test_default_bind_is_loopback_only(endpoint, port):

@@ -27,6 +27,7 @@ class ScriptedTrainer(unity_to_external_pb2_grpc.UnityToExternalProtoServicer):
 
     def __init__(self) -> None:
         self.requests: queue.Queue = queue.Queue()
+        self.user_agents: list[str] = []  # of each call: which gRPC client the stub used
         self.responses: queue.Queue = queue.Queue()
         self.server = grpc.server(ThreadPoolExecutor(max_workers=4))
         unity_to_external_pb2_grpc.add_UnityToExternalProtoServicer_to_server(self, self.server)
@@ -34,6 +35,7 @@ class ScriptedTrainer(unity_to_external_pb2_grpc.UnityToExternalProtoServicer):
         self.server.start()
 
     def Exchange(self, request, context):  # noqa: N802
+        self.user_agents.append(dict(context.invocation_metadata()).get("user-agent", ""))
         self.requests.put(request)
         return self.responses.get(timeout=30)
 

@@ -32,11 +32,13 @@ def position(info) -> int:
 
 
 @pytest.mark.parametrize("transport", ["http2", "grpcio"])
-def test_handshake_m1_m2_and_brain_parameters_only_first_time(trainer, launch, transport, monkeypatch):
-    # the stub's own HTTP/2 client (default) and grpcio's channel (MLAGENTS_LIKE_TRANSPORT=grpcio)
-    monkeypatch.setenv("MLAGENTS_LIKE_TRANSPORT", transport)
-    process = launch(trainer.port, "basic")
+def test_handshake_m1_m2_and_brain_parameters_only_first_time(trainer, launch, transport):
+    # the stub's own HTTP/2 client (default) and grpcio's channel (--transport grpcio)
+    process = launch(trainer.port, "basic", "--transport", transport)
     first, second, third = handshake(trainer, num_areas=2)
+    # the client the flag chose made the calls (grpcio's says grpc-python/..., ours mlagents-like-http2/1)
+    assert {agent.split("/")[0] for agent in trainer.user_agents} == {
+        "grpc-python" if transport == "grpcio" else "mlagents-like-http2"}
 
     assert first.header.status == 200
     init = first.unity_output.rl_initialization_output

@@ -8,15 +8,16 @@ import sys
 
 import pytest
 
-from trainer.cli import limit_blas_threads
+from trainer.cli import read_environment
+from trainer.errors import ConfigError
 
-# In a fresh interpreter: apply the limit as main() does, then count the process's threads
+# In a fresh interpreter: read the environment as main() does, then count the process's threads
 # after a matrix product big enough for OpenBLAS to use every thread it was allowed.
 PROBE = """
 import json, os, sys
 import trainer.cli
 assert "numpy" not in sys.modules  # main() can still set the variables in time
-trainer.cli.limit_blas_threads()
+trainer.cli.read_environment()
 import numpy as np
 a = np.ones((600, 600)); a @ a
 print(json.dumps({"threads": len(os.listdir("/proc/self/task")),
@@ -40,16 +41,17 @@ def test_one_blas_thread_by_default_and_the_users_choice_otherwise():
     assert _probe({"OPENBLAS_NUM_THREADS": "2"}) == {"threads": 2, "OPENBLAS_NUM_THREADS": "2"}
 
 
-def test_limit_blas_threads_rules():
+def test_blas_thread_rules():
     env: dict = {}
-    limit_blas_threads(env)
+    read_environment(env)
     assert env == {"OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     env = {"OMP_NUM_THREADS": "4"}
-    limit_blas_threads(env)
+    read_environment(env)
     assert env == {"OMP_NUM_THREADS": "4"}  # the user's own setting stands
     env = {"MLAGENTS_LIKE_BLAS_THREADS": "3", "OPENBLAS_NUM_THREADS": "8"}
-    limit_blas_threads(env)
+    read_environment(env)
     assert env["OPENBLAS_NUM_THREADS"] == "3" and env["MKL_NUM_THREADS"] == "3"
     env = {"MLAGENTS_LIKE_BLAS_THREADS": "many"}
-    limit_blas_threads(env)
-    assert env["OPENBLAS_NUM_THREADS"] == "1"
+    with pytest.raises(ConfigError, match="MLAGENTS_LIKE_BLAS_THREADS='many'"):
+        read_environment(env)
+    assert "OPENBLAS_NUM_THREADS" not in env  # refused before anything was set

@@ -1,4 +1,4 @@
-"""Samplers, seed offsets (§4.3) and lesson advancement (§6.7) with hand-computed numbers."""
+"""Samplers, seed offsets (docs/protocol.md §4.3) and lesson advancement (docs/configuration.md §6.7) with hand-computed numbers."""
 from __future__ import annotations
 
 import logging
@@ -8,7 +8,6 @@ import pytest
 from trainer.config import (
     CompletionCriteria,
     ConstantSampler,
-    EnvironmentParameterManager,
     EnvironmentParameterSettings,
     GaussianSampler,
     Lesson,
@@ -17,6 +16,7 @@ from trainer.config import (
     assign_seeds,
 )
 from trainer.config.env_params import sampler_as_dict, structure_environment_parameters
+from trainer.curriculum import EnvironmentParameterManager
 
 
 def single(name, sampler):

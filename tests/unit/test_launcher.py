@@ -1,4 +1,4 @@
-"""Simulator launching: executable lookup, argv order (spec §1.2), restart limits (§1.3), processes."""
+"""Simulator launching: executable lookup, argv order (docs/protocol.md §1.2), restart limits (docs/protocol.md §1.3), processes."""
 from __future__ import annotations
 
 import os
@@ -170,13 +170,19 @@ def test_stub_is_told_to_poll_and_a_unity_build_never_is():
     assert "--spin-wait-ms" not in build_launch_command("/b/G", 0, 5005, stub_spin_wait=0.0015)
 
 
+def test_stub_is_told_the_transport_and_a_unity_build_never_is():
+    stub = build_launch_command("stub:basic", 0, 5005, stub_transport="grpcio")
+    assert stub[:7] == [sys.executable, "-m", "unity_stub_env.cli", "--task", "basic", "--transport", "grpcio"]
+    assert "--transport" not in build_launch_command("stub:basic", 0, 5005, stub_transport="http2")
+    assert "--transport" not in build_launch_command("/b/G", 0, 5005, stub_transport="grpcio")
+
+
 @pytest.mark.parametrize("cpus, expected", [(1, 0.0), (2, 0.0), (3, 0.001)])
 def test_pool_polls_only_with_a_cpu_for_the_trainer_and_each_simulator(monkeypatch, cpus, expected):
     from trainer.envs.pool import EnvPool, PoolSettings
     from trainer.envs import cpus as cpu_helpers
 
     monkeypatch.setattr(cpu_helpers, "usable_cpus", lambda: cpus)
-    monkeypatch.delenv(cpu_helpers.SPIN_WAIT_ENV, raising=False)
     settings = PoolSettings(env_path="stub:basic", env_args=(), base_port=5005, num_envs=2, num_areas=1,
                             seed=0, timeout_wait=5, bind="127.0.0.1", no_graphics=True,
                             no_graphics_monitor=False, log_folder=None)
@@ -216,7 +222,6 @@ def test_lifetime_limit_counts_only_allowed_restarts():
     policy = RestartPolicy(max_lifetime_restarts=3, rate_limit_n=1, rate_limit_period_s=60)
     results = [policy.allow_restart(t) for t in (0, 10, 60, 70, 120, 180, 240)]
     assert results == [True, False, True, False, True, False, False]
-    assert "3 restarts" in policy.describe_limits()
 
 
 def test_has_quota_does_not_count():
@@ -313,9 +318,10 @@ def test_missing_executable_is_a_user_error(tmp_path):
         SimulatorProcess([str(tmp_path / "nope")]).start()
 
 
-def test_for_env_resolves_and_builds(tmp_path):
+def test_a_resolved_player_is_launched_with_its_port(tmp_path):
     player = _make_file(tmp_path / "Game.x86_64")
-    process = SimulatorProcess.for_env(str(tmp_path / "Game"), 1, 5005, no_graphics=True)
+    process = SimulatorProcess(build_launch_command(resolve_env_path(str(tmp_path / "Game")), 1, 5005,
+                                                    no_graphics=True), worker_id=1)
     assert process.command == [player, "-nographics", "-batchmode", "--mlagents-port", "5006"]
     assert process.port == 5006 and not process.is_stub
 

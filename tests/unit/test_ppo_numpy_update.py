@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
 import time
 
 import numpy as np
@@ -260,9 +261,18 @@ def test_a_child_that_hangs_or_dies_is_reaped_and_the_parent_steps_the_critic(ho
     assert len(children) == 1 and len(caplog.records) == 1
 
 
-def test_the_fork_is_kept_for_updates_worth_it():
+@pytest.mark.skipif(not (sys.platform.startswith("linux") and hasattr(os, "fork")), reason="needs Linux and fork")
+def test_the_fork_is_kept_for_updates_worth_it(monkeypatch):
     # basic: 3 epochs x 8 minibatches x 32 rows, 20x20 + 20 + 21 critic parameters; ball3d:
     # 3 x 187 x 64 rows, 8x128 + 128 + 128x128 + 128 + 129 parameters
-    assert not numpy_update.fork_pays_off(3 * 8 * 32 * (20 * 20 + 20 + 21))
+    basic = 3 * 8 * 32 * (20 * 20 + 20 + 21)
     ball3d = 3 * 187 * 64 * (8 * 128 + 128 + 128 * 128 + 128 + 129)
-    assert numpy_update.fork_pays_off(ball3d) == numpy_update.fork_pays_off(float("inf"))
+    # the machine as the decision sees it: CPUs in the affinity mask, Python threads alive
+    cpus, threads = [2], [1]
+    monkeypatch.setattr(numpy_update, "usable_cpus", lambda: cpus[0])
+    monkeypatch.setattr(numpy_update.threading, "active_count", lambda: threads[0])
+    assert (numpy_update.fork_pays_off(basic), numpy_update.fork_pays_off(ball3d)) == (False, True)
+    cpus[0] = 1  # no CPU for the child
+    assert not numpy_update.fork_pays_off(ball3d)
+    cpus[0], threads[0] = 2, 2  # another thread could hold a lock across the fork
+    assert not numpy_update.fork_pays_off(ball3d)

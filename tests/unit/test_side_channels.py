@@ -1,22 +1,17 @@
-"""Side channel framing and payloads, checked against hand-written bytes from spec §4.2."""
+"""Side channel framing and payloads, checked against hand-written bytes from docs/protocol.md §4.2."""
 from __future__ import annotations
 
-import hashlib
-import hmac
-import json
 import logging
 import uuid
 
 import numpy as np
 import pytest
-from google.protobuf import any_pb2
 
 from protos import side_channels as sc
-from protos.communicator_objects import training_analytics_pb2
 from protos.errors import ProtocolError
 from protos.types import StatsAggregationMethod
 
-# --- the four observed wire examples of spec §4.2, byte for byte --------------------------------
+# --- the four observed wire examples of docs/protocol.md §4.2, byte for byte --------------------------------
 
 GRAVITY_HEX = "07000000" + "gravity".encode().hex() + "00000000" + "c3f51c41"
 SCALE_HEX = "05000000" + "scale".encode().hex() + "01000000" + "2b000000" + "00000000" + "0000003f" + "00004040"
@@ -132,13 +127,13 @@ def test_non_ascii_string_rejected_with_its_name():
 
 def test_payload_primitives_bytes():
     data = (
-        sc.PayloadWriter().write_bool(True).write_int32(-2).write_float32(1.5)
+        sc.PayloadWriter().write_int32(-2).write_float32(1.5)
         .write_string("ab").write_float_list([0.25]).getvalue()
     )
-    assert data.hex() == "01" + "feffffff" + "0000c03f" + "02000000" + "6162" + "01000000" + "0000803e"
+    assert data.hex() == "feffffff" + "0000c03f" + "02000000" + "6162" + "01000000" + "0000803e"
     reader = sc.PayloadReader(data)
-    assert (reader.read_bool(), reader.read_int32(), reader.read_float32(), reader.read_string(),
-            reader.read_float_list()) == (True, -2, 1.5, "ab", [0.25])
+    assert (reader.read_int32(), reader.read_float32(), reader.read_string(),
+            reader.read_float_list()) == (-2, 1.5, "ab", [0.25])
     assert reader.remaining == 0
 
 
@@ -214,23 +209,19 @@ def test_router_drain_keeps_queue_order_then_clears():
     assert router.drain() == b""
 
 
-def test_router_dispatch_stats_properties_and_raw():
-    raw_id = uuid.UUID("12345678-1234-5678-1234-567812345678")
-    received = []
+def test_router_dispatch_stats_and_properties_and_skips_other_channels():
+    other_id = uuid.UUID("12345678-1234-5678-1234-567812345678")
     router = sc.SideChannelRouter()
-    router.register_raw(raw_id, received.append)
     data = sc.pack_messages([
         (sc.STATS_CHANNEL_ID, sc.encode_stat("a", 1.0, StatsAggregationMethod.AVERAGE)),
         (sc.FLOAT_PROPERTIES_CHANNEL_ID, sc.encode_float_property("p", 2.0)),
-        (raw_id, b"hello"),
+        (other_id, b"hello"),
         (sc.STATS_CHANNEL_ID, sc.encode_stat("b", 3.0, StatsAggregationMethod.MOST_RECENT)),
         (sc.FLOAT_PROPERTIES_CHANNEL_ID, sc.encode_float_property("p", 4.0)),
     ])
     incoming = router.dispatch(data)
     assert incoming.stats == [("a", 1.0, StatsAggregationMethod.AVERAGE), ("b", 3.0, StatsAggregationMethod.MOST_RECENT)]
     assert incoming.float_properties == {"p": 4.0}
-    assert incoming.raw == {raw_id: [b"hello"]}
-    assert received == [b"hello"]
 
 
 def test_unknown_channel_warned_once_per_id(caplog):
@@ -251,44 +242,6 @@ def test_unknown_channel_warned_once_per_id(caplog):
     assert first.stats == [("s", 1.0, StatsAggregationMethod.SUM)]
 
 
-# --- training analytics ------------------------------------------------------------------------
-
-def _expected_hash(text: str) -> str:
-    return hmac.new(b"unity.ml-agents", text.encode(), hashlib.sha256).hexdigest()
-
-
-def test_behavior_initialized_is_any_with_hashed_name():
-    payload = sc.encode_training_behavior_initialized(
-        "3DBall", "ppo", reward_signals=("extrinsic", "curiosity"), config={"demo_path": "x.demo"}
-    )
-    wrapper = any_pb2.Any.FromString(payload)
-    assert wrapper.type_url == "type.googleapis.com/communicator_objects.TrainingBehaviorInitialized"
-    msg = training_analytics_pb2.TrainingBehaviorInitialized()
-    assert wrapper.Unpack(msg)
-    assert msg.behavior_name == _expected_hash("3DBall") and len(msg.behavior_name) == 64
-    assert (msg.trainer_type, msg.extrinsic_reward_enabled, msg.curiosity_reward_enabled, msg.gail_reward_enabled) == (
-        "ppo", True, True, False)
-    assert json.loads(msg.config) == {"demo_path": _expected_hash("x.demo")}
-
-
-def test_environment_initialized_hashes_behavior_names():
-    payload = sc.encode_training_environment_initialized(
-        mlagents_version="1.1.0", mlagents_envs_version="1.1.0", torch_version="2.13",
-        torch_device_type="cpu", num_envs=2, num_environment_parameters=1,
-        run_options={"behaviors": {"Walker": {"trainer_type": "ppo"}},
-                     "environment_parameters": {"gravity": {"curriculum": [{"name": "L1"}]}}},
-        python_version="3.11.9",
-    )
-    wrapper = any_pb2.Any.FromString(payload)
-    assert wrapper.type_url == "type.googleapis.com/communicator_objects.TrainingEnvironmentInitialized"
-    msg = training_analytics_pb2.TrainingEnvironmentInitialized()
-    wrapper.Unpack(msg)
-    assert (msg.num_envs, msg.num_environment_parameters, msg.python_version) == (2, 1, "3.11.9")
-    options = json.loads(msg.run_options)
-    assert options["behaviors"] == {_expected_hash("Walker"): {"trainer_type": "ppo"}}
-    assert options["environment_parameters"] == {_expected_hash("gravity"): {"curriculum": [{"name": _expected_hash("L1")}]}}
-
-
 def test_a_runs_simulators_warn_about_an_unknown_channel_once_between_them(caplog):
     from trainer.run import make_routers
 
@@ -297,5 +250,5 @@ def test_a_runs_simulators_warn_about_an_unknown_channel_once_between_them(caplo
     routers = make_routers(3)
     with caplog.at_level(logging.WARNING, logger="mlagents_like"):
         for router in routers * 2:
-            assert router.dispatch(data).raw == {}
+            assert router.dispatch(data) == sc.IncomingSideChannelData()
     assert [r.getMessage().count(str(unknown)) for r in caplog.records] == [1]

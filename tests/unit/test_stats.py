@@ -151,8 +151,7 @@ def test_reporter_write_fans_out_per_brain_then_clears():
 
 def test_reporter_text_and_property_reach_writers():
     w = RecordingWriter()
-    reporter = StatsReporter()
-    reporter.add_writer(w)
+    reporter = StatsReporter([w])
     reporter.write_text("Ball", "Notes", "hello", 5)
     reporter.add_property("Ball", "hyperparameters", {"batch_size": 64})
     assert w.texts == [("Ball", "Notes", "hello", 5)]

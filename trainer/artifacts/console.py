@@ -1,4 +1,4 @@
-"""Console output: the ML-Agents summary line per brain and a live progress line (spec §7).
+"""Console output: the ML-Agents summary line per brain and a live progress line (docs/outputs.md §7).
 
 Summary line, logged at INFO every summary_freq steps::
 

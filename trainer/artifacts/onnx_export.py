@@ -1,4 +1,4 @@
-"""Export a policy's actor to the ONNX model Unity's inference engine loads (spec §8).
+"""Export a policy's actor to the ONNX model Unity's inference engine loads (docs/outputs.md §8).
 
 Legacy TorchScript exporter, opset 9. Inputs obs_0..obs_{n-1} (+ action_masks, float 1 = allowed, only
 with discrete branches; + recurrent_in [batch, 1, memory_size], only with memory). Outputs, in order:
@@ -33,7 +33,6 @@ class ExportableActor(nn.Module):
         super().__init__()
         self.actor = actor
         self.n_obs = n_obs
-        self.has_continuous = actor.action_spec.continuous_size > 0
         self.has_discrete = len(actor.action_spec.discrete_branches) > 0
         self.has_memory = actor.network_body.lstm is not None
 

@@ -5,7 +5,7 @@ Vocabulary follows ML-Agents: a *category* is a brain (behavior name, one Tensor
 :class:`StatsAggregator` until :meth:`StatsReporter.write` hands a ``{key: StatsSummary}`` dict to
 every writer and clears the brain's aggregator.
 
-Aggregation methods (spec §4.2):
+Aggregation methods (docs/protocol.md §4.2):
 
 * ``AVERAGE``: the summary value is the mean of everything added since the last write.
 * ``SUM``: the summary value is the sum.
@@ -236,10 +236,6 @@ class StatsReporter:
         self._aggregators: dict[str, StatsAggregator] = {}
         self._lock = threading.RLock()
 
-    def add_writer(self, writer: Any) -> None:
-        with self._lock:
-            self.writers.append(writer)
-
     def aggregator(self, brain: str) -> StatsAggregator:
         """The brain's aggregator (created on first use)."""
         agg = self._aggregators.get(brain)
@@ -277,7 +273,7 @@ class StatsReporter:
         env_stats: Mapping[str, Sequence[tuple[float, StatsAggregationMethod]]],
         worker_id: int,
     ) -> None:
-        """Stats-side-channel values from one env step (spec §4.2).
+        """Stats-side-channel values from one env step (docs/protocol.md §4.2).
 
         Every stat is recorded under each brain in ``brains`` (the behaviors present in that
         step); MOST_RECENT stats are taken from worker 0 only.

@@ -1,8 +1,7 @@
-"""Hierarchical timers and gauges written to ``run_logs/timers.json`` (spec §7).
+"""Hierarchical timers and gauges written to ``run_logs/timers.json`` (docs/outputs.md §7).
 
-A :class:`TimerTree` is an ordinary object (no module globals). It is meant to be driven by one
-thread; a worker thread keeps its own tree and the owner folds it in with :meth:`TimerTree.merge`.
-That keeps ``scope`` lock-free: entering and leaving costs two ``perf_counter`` calls, a dict
+A :class:`TimerTree` is an ordinary object (no module globals), driven by the trainer's one
+thread. That keeps ``scope`` lock-free: entering and leaving costs two ``perf_counter`` calls, a dict
 lookup and a list push/pop.
 
     timers = TimerTree()
@@ -14,14 +13,13 @@ lookup and a list push/pop.
 """
 from __future__ import annotations
 
-import functools
 import json
 import math
 import os
 import sys
 import time
 from importlib import metadata as importlib_metadata
-from typing import Any, Callable, TypeVar
+from typing import Any, Callable
 
 from protos.versions import COMMUNICATION_VERSION
 from trainer.artifacts.atomic import atomic_write
@@ -30,9 +28,6 @@ __all__ = ["TimerNode", "GaugeNode", "TimerTree", "TIMER_FORMAT_VERSION", "packa
 
 TIMER_FORMAT_VERSION = "0.1.0"
 PACKAGE_NAME = "mlagents-like"
-
-F = TypeVar("F", bound=Callable[..., Any])
-
 
 def package_version(dist_name: str = PACKAGE_NAME, module: str | None = None) -> str:
     """Version of an installed distribution (prefers ``module.__version__`` if imported)."""
@@ -49,27 +44,18 @@ def package_version(dist_name: str = PACKAGE_NAME, module: str | None = None) ->
 class TimerNode:
     """Total seconds and entry count of one code block, plus its children by name."""
 
-    __slots__ = ("children", "total", "count", "is_parallel")
+    __slots__ = ("children", "total", "count")
 
     def __init__(self) -> None:
         self.children: dict[str, TimerNode] = {}
         self.total = 0.0
         self.count = 0
-        self.is_parallel = False
 
     def child(self, name: str) -> TimerNode:
         node = self.children.get(name)
         if node is None:
             node = self.children[name] = TimerNode()
         return node
-
-    def merge(self, other: TimerNode, is_parallel: bool) -> None:
-        """Add ``other``'s totals and counts into this node, recursively."""
-        self.total += other.total
-        self.count += other.count
-        self.is_parallel |= is_parallel
-        for name, other_child in other.children.items():
-            self.child(name).merge(other_child, is_parallel)
 
 
 class GaugeNode:
@@ -160,47 +146,6 @@ class TimerTree:
         """``with timers.scope("name"):`` times the block under the currently open scope."""
         return _Scope(self, name)
 
-    def timed(self, name: str | None = None) -> Callable[[F], F]:
-        """Decorator timing every call of a function (default name: its ``__qualname__``)."""
-
-        def decorate(func: F) -> F:
-            label = name or func.__qualname__
-
-            @functools.wraps(func)
-            def wrapped(*args: Any, **kwargs: Any) -> Any:
-                with _Scope(self, label):
-                    return func(*args, **kwargs)
-
-            return wrapped  # type: ignore[return-value]
-
-        return decorate
-
-    def merge(self, other: TimerTree, root_name: str | None = None, is_parallel: bool = True) -> None:
-        """Fold another tree (e.g. a worker thread's) into this one, and its gauges.
-
-        With ``root_name`` the other root's children go under a child of that name, whose total
-        is the other tree's elapsed time. Gauges merge min/max/count; the other's value wins.
-        """
-        if root_name:
-            target = self.root.child(root_name)
-            target.total += other._clock() - other._start
-            target.count += 1
-            target.is_parallel |= is_parallel
-            for name, child in other.root.children.items():
-                target.child(name).merge(child, is_parallel)
-        else:
-            for name, child in other.root.children.items():
-                self.root.child(name).merge(child, is_parallel)
-        for name, gauge in other.gauges.items():
-            mine = self.gauges.get(name)
-            if mine is None:
-                mine = self.gauges[name] = GaugeNode(gauge.value)
-                mine.count = 0
-            mine.value = gauge.value
-            mine.min = min(mine.min, gauge.min)
-            mine.max = max(mine.max, gauge.max)
-            mine.count += gauge.count
-
     # -- gauges and metadata --------------------------------------------------------------------
     def set_gauge(self, name: str, value: float) -> None:
         """Track the latest value and its min/max/count; NaN is ignored."""
@@ -213,14 +158,9 @@ class TimerTree:
         else:
             gauge.update(value)
 
-    def add_metadata(self, key: str, value: str) -> None:
-        self.metadata[key] = str(value)
-
     # -- output ---------------------------------------------------------------------------------
     def _node_dict(self, node: TimerNode) -> dict[str, Any]:
         out: dict[str, Any] = {"total": node.total, "count": node.count}
-        if node.is_parallel:
-            out["is_parallel"] = True
         children = {name: self._node_dict(child) for name, child in node.children.items()}
         child_total = sum(child["total"] for child in children.values())
         out["self"] = max(0.0, node.total - child_total)

@@ -1,4 +1,4 @@
-"""``run_logs/training_status.json``: what --resume needs that is not inside a model (spec §7).
+"""``run_logs/training_status.json``: what --resume needs that is not inside a model (docs/outputs.md §7).
 
 Layout (one JSON object)::
 
@@ -48,7 +48,6 @@ METADATA = "metadata"
 LESSON_NUM = "lesson_num"
 CHECKPOINTS = "checkpoints"
 FINAL_CHECKPOINT = "final_checkpoint"
-ELO = "elo"
 
 
 def current_metadata() -> dict[str, str]:
@@ -195,18 +194,3 @@ class TrainingStatus:
         if not isinstance(entry, dict) or not entry.get(FINAL_CHECKPOINT):
             return None
         return CheckpointEntry.from_dict(entry[FINAL_CHECKPOINT])
-
-    def set_elo(self, brain: str, elo: float) -> None:
-        self._category(brain)[ELO] = float(elo)
-
-    def get_elo(self, brain: str) -> float | None:
-        entry = self.state.get(brain)
-        return entry.get(ELO) if isinstance(entry, dict) else None
-
-    def set_value(self, category: str, key: str, value: Any) -> None:
-        """Any other JSON-serialisable per-category value."""
-        self._category(category)[key] = value
-
-    def get_value(self, category: str, key: str, default: Any = None) -> Any:
-        entry = self.state.get(category)
-        return entry.get(key, default) if isinstance(entry, dict) else default

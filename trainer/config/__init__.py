@@ -1,13 +1,13 @@
 """Run configuration: the ML-Agents Release-22 YAML schema, legacy conversion and the CLI.
 
-Import order matters: env_params pulls in param_manager at its end.
+Only typed, frozen settings and their loading and validation live here; the run's changing state
+(the curriculum's current lessons: ``trainer.curriculum``) does not.
 """
 from __future__ import annotations
 
-from trainer.config.env_params import (  # noqa: F401  (first: see module docstring)
+from trainer.config.env_params import (
     CompletionCriteria,
     ConstantSampler,
-    EnvironmentParameterManager,
     EnvironmentParameterSettings,
     GaussianSampler,
     Lesson,
@@ -38,7 +38,7 @@ from trainer.config.cli_args import build_parser, parse_run_options
 
 __all__ = [
     "BehavioralCloningSettings", "CheckpointSettings", "CompletionCriteria", "ConstantSampler",
-    "CuriositySettings", "EngineSettings", "EnvSettings", "EnvironmentParameterManager",
+    "CuriositySettings", "EngineSettings", "EnvSettings",
     "EnvironmentParameterSettings", "GAILSettings", "GaussianSampler", "Lesson", "MemorySettings",
     "MultiRangeUniformSampler", "NetworkSettings", "PPOSettings", "RNDSettings", "RewardSignalSettings",
     "RunOptions", "Sampler", "SelfPlaySettings", "TorchSettings", "TrainerSettings", "UniformSampler",

@@ -1,4 +1,4 @@
-"""``mlagents-like-learn`` command line: the flags of ``mlagents-learn`` (spec §5) plus ``--bind``.
+"""``mlagents-like-learn`` command line: the flags of ``mlagents-learn`` (docs/configuration.md §5) plus ``--bind``.
 
 A flag overrides the YAML only if it was actually given on the command line; the given flags are
 tracked by the parser's actions (``namespace._given_flags``), not by comparing with defaults.

@@ -1,4 +1,4 @@
-"""Environment parameters: samplers, curriculum lessons and their YAML structuring (spec §6.7, §4.3).
+"""Environment parameters: samplers, curriculum lessons and their YAML structuring (docs/configuration.md §6.7, docs/protocol.md §4.3).
 
 A parameter is always stored as a curriculum. A plain number or a sampler becomes a one-lesson
 curriculum whose lesson is named after the parameter; ``configuration.yaml`` shows that form.
@@ -193,7 +193,7 @@ def structure_lesson(raw: Any, path: str) -> Lesson:
 
 
 def structure_parameter(name: str, raw: Any, path: str) -> EnvironmentParameterSettings:
-    """One parameter in any of the three forms of §6.7, checked as a lesson chain."""
+    """One parameter in any of the three forms of docs/configuration.md §6.7, checked as a lesson chain."""
     if not (isinstance(raw, Mapping) and "curriculum" in raw):
         return EnvironmentParameterSettings((Lesson(name=name, value=structure_sampler(raw, path)),))
     check_known_keys(raw, ("curriculum",), path)
@@ -261,7 +261,7 @@ def sampler_as_dict(sampler: Sampler) -> dict:
 
 
 def environment_parameters_as_dict(params: Mapping[str, EnvironmentParameterSettings]) -> dict:
-    """The expanded one-lesson-curriculum form of §6.7, key order as the reference writes it."""
+    """The expanded one-lesson-curriculum form of docs/configuration.md §6.7, key order as the reference writes it."""
     out = {}
     for name, settings in params.items():
         lessons = []
@@ -281,7 +281,7 @@ def environment_parameters_as_dict(params: Mapping[str, EnvironmentParameterSett
 def assign_seeds(
     params: Mapping[str, EnvironmentParameterSettings], run_seed: int
 ) -> dict[str, EnvironmentParameterSettings]:
-    """A copy where every lesson value with seed -1 gets ``run_seed + offset`` (spec §4.3).
+    """A copy where every lesson value with seed -1 gets ``run_seed + offset`` (docs/protocol.md §4.3).
 
     The offset starts at 0 and grows by 1 for each such value, constants included, in parameter
     order and then lesson order. Values with an explicit seed keep it and use no offset.
@@ -312,8 +312,4 @@ __all__ = [
     "environment_parameters_as_dict",
     "sampler_as_dict",
     "assign_seeds",
-    "EnvironmentParameterManager",
 ]
-
-# The manager lives in its own module; it is re-exported here so callers need one import path.
-from trainer.config.param_manager import EnvironmentParameterManager  # noqa: E402

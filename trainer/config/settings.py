@@ -1,4 +1,4 @@
-"""Typed, frozen run configuration in the ML-Agents Release-22 schema (spec §5, §6).
+"""Typed, frozen run configuration in the ML-Agents Release-22 schema (docs/configuration.md §5, docs/configuration.md §6).
 
 Field order is the order ``configuration.yaml`` is written in, which follows the reference.
 Every default is the reference default. Building these from YAML (with all the checks) is
@@ -20,7 +20,6 @@ logger = logging.getLogger("mlagents_like")
 SCHEDULES = ("linear", "constant")
 ENCODER_TYPES = ("simple", "nature_cnn", "resnet", "match3", "fully_connected")
 CONDITIONING_TYPES = ("hyper", "none")
-REWARD_SIGNAL_NAMES = ("extrinsic", "curiosity", "gail", "rnd")
 TRAINER_TYPES = ("ppo", "sac", "poca")
 TRAINABLE_TRAINER_TYPES = ("ppo",)
 DEFAULT_CHECKPOINT_NAME = "checkpoint.pt"
@@ -192,11 +191,6 @@ class CheckpointSettings:
     def write_path(self) -> str:
         """results/<run-id>"""
         return os.path.join(self.results_dir, self.run_id)
-
-    @property
-    def run_logs_dir(self) -> str:
-        """results/<run-id>/run_logs"""
-        return os.path.join(self.write_path, "run_logs")
 
     @property
     def maybe_init_path(self) -> str | None:

@@ -1,4 +1,4 @@
-"""Raw ``behaviors.<name>`` / ``default_settings`` blocks -> checked ``TrainerSettings`` (spec §6.2-6.6)."""
+"""Raw ``behaviors.<name>`` / ``default_settings`` blocks -> checked ``TrainerSettings`` (docs/configuration.md §6.2-§6.6)."""
 from __future__ import annotations
 
 import dataclasses

@@ -1,6 +1,6 @@
 """Launching simulators: find the executable, build its command line, run it, and decide restarts.
 
-Spec §1.2 (executable lookup, argument order) and §1.3 (close timeouts, restart limits).
+docs/protocol.md §1.2 (executable lookup, argument order) and docs/protocol.md §1.3 (close timeouts, restart limits).
 ``--env stub:TASK`` launches the built-in MuJoCo stub (``python -m unity_stub_env.cli --task TASK``)
 with the same Unity-style arguments, so everything downstream treats both alike.
 """
@@ -16,7 +16,7 @@ from collections import deque
 from typing import IO
 
 from trainer.errors import ConfigError, EnvironmentNotFoundError
-from unity_stub_env import spin_wait_args
+from unity_stub_env import spin_wait_args, transport_args
 
 logger = logging.getLogger("mlagents_like")
 
@@ -122,19 +122,21 @@ def build_launch_command(
     seed: int | None = None,
     num_areas: int = 1,
     stub_spin_wait: float = 0.0,
+    stub_transport: str = "http2",
 ) -> list[str]:
-    """The argv for worker ``worker_id``, in the order of spec §1.2.
+    """The argv for worker ``worker_id``, in the order of docs/protocol.md §1.2.
 
     ``env_path`` is a resolved executable path or ``stub:TASK``. ``seed`` and ``num_areas`` are
     not command-line arguments (they travel in the initialization message); they are accepted so
     one set of env settings can be passed through, and ``num_areas`` is checked here.
-    ``stub_spin_wait`` (s) is passed to the stub as ``--spin-wait-ms`` (never to a Unity build).
+    ``stub_spin_wait`` (s) is passed to the stub as ``--spin-wait-ms``, ``stub_transport`` as
+    ``--transport`` unless it is the stub's default http2 (never to a Unity build).
     """
     if num_areas < 1:
         raise ConfigError(f"--num-areas must be at least 1, got {num_areas}.")
     if is_stub_env(env_path):
         command = [sys.executable, "-m", "unity_stub_env.cli", "--task", env_path[len(STUB_PREFIX):]]
-        command += spin_wait_args(stub_spin_wait)
+        command += spin_wait_args(stub_spin_wait) + transport_args(stub_transport)
     else:
         command = [env_path]
     extra = list(env_args or [])
@@ -184,13 +186,6 @@ class SimulatorProcess:
         self.output_to_log = self.is_stub if output_to_log is None else output_to_log
         self._process: subprocess.Popen | None = None
         self._log_handle: IO[bytes] | None = None
-
-    @classmethod
-    def for_env(cls, env_path: str, worker_id: int, base_port: int, *, debug: bool = False,
-                **launch_options) -> "SimulatorProcess":
-        """Resolve ``env_path`` and build the command (options as in ``build_launch_command``)."""
-        command = build_launch_command(resolve_env_path(env_path), worker_id, base_port, **launch_options)
-        return cls(command, worker_id=worker_id, debug=debug)
 
     @property
     def port(self) -> int | None:
@@ -306,7 +301,7 @@ class SimulatorProcess:
 # Restarts
 # --------------------------------------------------------------------------------------------
 class RestartPolicy:
-    """Whether a crashed simulator may be restarted (spec §1.3); the pool keeps one per worker.
+    """Whether a crashed simulator may be restarted (docs/protocol.md §1.3); the pool keeps one per worker.
 
     A restart is allowed while fewer than ``max_lifetime_restarts`` restarts happened in total
     (-1: unlimited) and fewer than ``rate_limit_n`` happened in the last ``rate_limit_period_s``
@@ -339,10 +334,3 @@ class RestartPolicy:
             return False
         self.record_restart(now)
         return True
-
-    def describe_limits(self) -> str:
-        lifetime = "unlimited" if self.max_lifetime_restarts == -1 else str(self.max_lifetime_restarts)
-        rate = ("no rate limit" if self.rate_limit_n == -1
-                else f"at most {self.rate_limit_n} per {self.rate_limit_period_s:g} s")
-        return (f"{self.restart_count} restarts so far; lifetime limit {lifetime} "
-                f"(--max-lifetime-restarts), {rate} (--restarts-rate-limit-n/-period-s)")

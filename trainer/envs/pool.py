@@ -6,7 +6,7 @@ for their replies, so N simulators run in parallel while the trainer waits once.
 lockstep (every worker every step): with seeds fixed, a run is repeatable, which ML-Agents' "go on
 when any worker replied" manager does not give.
 
-A worker whose simulator dies is restarted under the restart policy (spec §1.3); after a restart
+A worker whose simulator dies is restarted under the restart policy (docs/protocol.md §1.3); after a restart
 every worker is reset and the caller is told (``restarted``) so it drops partial trajectories.
 """
 from __future__ import annotations
@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from protos.types import ActionTuple, BehaviorSpec, StepResult
+from trainer.config.env_vars import DEFAULT_SPIN_WAIT_S
 from trainer.envs.cpus import spin_budget
 from trainer.envs.launcher import RestartPolicy, SimulatorProcess, build_launch_command, resolve_env_path
 from trainer.errors import SimulatorExitedError, UnityTimeOutError, UserError
@@ -44,6 +45,8 @@ class PoolSettings:
     restarts_rate_limit_n: int = 1
     restarts_rate_limit_period_s: float = 60
     debug: bool = False
+    spin_wait_s: float = DEFAULT_SPIN_WAIT_S  # MLAGENTS_LIKE_SPIN_WAIT_MS (trainer.config.env_vars)
+    transport: str = "http2"  # MLAGENTS_LIKE_TRANSPORT: the server's and the launched stubs'
 
 
 @dataclass
@@ -73,12 +76,14 @@ class _Worker:
             cmd = build_launch_command(
                 self.env_path, self.worker_id, s.base_port, s.no_graphics, s.no_graphics_monitor,
                 s.log_folder, list(s.env_args), s.seed + self.worker_id, s.num_areas, self.spin_wait,
+                s.transport,
             )
             self.process = SimulatorProcess(cmd, self.worker_id, log_folder=s.log_folder, debug=s.debug)
         is_alive = self.process.is_alive if self.process else None
         describe = self.process.describe if self.process else "the Unity Editor"
         self.endpoint = UnityEndpoint(self.port, bind=s.bind, timeout_wait=s.timeout_wait,
-                                      is_alive=is_alive, describe=describe, spin_wait=self.spin_wait)
+                                      is_alive=is_alive, describe=describe, spin_wait=self.spin_wait,
+                                      transport=s.transport)
         self.endpoint.start()  # bind before launching, so the simulator finds us listening
         if self.process:
             self.process.start()
@@ -110,7 +115,7 @@ class EnvPool:
         env_path = resolve_env_path(settings.env_path) if settings.env_path else None
         self.settings = settings
         # waiting sides poll instead of sleeping only if the trainer and every simulator have a CPU
-        spin_wait = spin_budget(settings.num_envs + 1)
+        spin_wait = spin_budget(settings.num_envs + 1, settings.spin_wait_s)
         self.workers = [_Worker(i, settings, env_path, spin_wait) for i in range(settings.num_envs)]
         self._initial_side_channel = initial_side_channel
         # each worker has its own restart quota, as in ML-Agents: two simulators that crash in the

@@ -2,7 +2,7 @@
 
 Each provider turns experiences into one reward per step (``evaluate``, before ``strength``),
 learns from every PPO minibatch (``update``, its own Adam) and has a value head of its own in
-the critic. Behaviour as in ML-Agents Release 22 (spec §10):
+the critic. Behaviour as in ML-Agents Release 22 (docs/ppo.md §10):
 
 * Both ignore ``done``: their returns are always bootstrapped with V(next obs).
 * Curiosity: a state encoder phi (a network body with the signal's network_settings), an inverse

@@ -6,7 +6,6 @@ then ``update`` whenever ``ready_to_update`` says the buffer holds more than buf
 from __future__ import annotations
 
 import logging
-import os
 from itertools import chain
 from typing import Any
 
@@ -49,7 +48,7 @@ class PPOTrainer:
     """PPO for one brain: ``policy`` acts, the critic estimates values, one Adam updates both."""
 
     def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams,
-                 seed: int, device: str = "cpu"):
+                 seed: int, device: str = "cpu", use_numpy_update: bool = True):
         for name in hyperparams.reward_signals:
             if name not in SUPPORTED_REWARD_SIGNALS:
                 raise ConfigError(
@@ -86,8 +85,8 @@ class PPOTrainer:
         self.buffer = UpdateBuffer()
         self.step = 0
         # minibatch steps in numpy for vector-observation networks on the CPU (numpy_update.py);
-        # MLAGENTS_LIKE_NUMPY_UPDATE=0 keeps autograd
-        self.numpy_update = os.environ.get("MLAGENTS_LIKE_NUMPY_UPDATE", "1") != "0"
+        # MLAGENTS_LIKE_NUMPY_UPDATE=0 (``use_numpy_update`` False) keeps autograd
+        self.numpy_update = use_numpy_update
         # value estimates of vector-observation critics in numpy: no per-trajectory torch op overhead
         self._numpy_critic = NumpyCritic(self.critic) if (
             numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None

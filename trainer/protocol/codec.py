@@ -68,7 +68,7 @@ _VERSION_RE = re.compile(r"(\d+)\.(\d+)(?:\.(\d+))?(?:[ab]\d+)?")  # StrictVersi
 
 # --------------------------------------------------------------------------- handshake helpers
 def check_communication_version(unity_version: str) -> None:
-    """Raise UnityVersionError unless Unity's communication API can talk to ours (spec §1.6).
+    """Raise UnityVersionError unless Unity's communication API can talk to ours (docs/protocol.md §1.6).
 
     Unity major 0: major and minor must equal ours. Otherwise the majors must be equal.
     """
@@ -95,7 +95,7 @@ def check_communication_version(unity_version: str) -> None:
 
 # --------------------------------------------------------------------------- behavior specs
 def behavior_spec_from_proto(brain_params, agent_info) -> BehaviorSpec:
-    """BrainParametersProto + the behavior's first AgentInfoProto → BehaviorSpec (spec §3.2)."""
+    """BrainParametersProto + the behavior's first AgentInfoProto → BehaviorSpec (docs/protocol.md §3.2)."""
     observation_specs = []
     for index, obs in enumerate(agent_info.observations):
         shape = tuple(obs.shape)

@@ -1,4 +1,4 @@
-"""PNG camera observations (spec §3.3): one or more PNG files concatenated, mapped to C×H×W.
+"""PNG camera observations (docs/protocol.md §3.3): one or more PNG files concatenated, mapped to C×H×W.
 
 Unity packs up to 3 channels per PNG and concatenates the files; ``compressed_channel_mapping``
 then says which output channel each decoded channel feeds (``-1`` drops it, shared targets are

@@ -1,4 +1,4 @@
-"""The gRPC server end of ONE simulator connection (spec §1).
+"""The gRPC server end of ONE simulator connection (docs/protocol.md §1).
 
 The simulator (Unity or unity-stub-env) is the gRPC client: every message it sends is the request
 of an ``Exchange`` call, and the trainer's next message is that call's response. Two transports
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import collections
 import logging
-import os
 import socket
 import threading
 import time
@@ -34,6 +33,7 @@ from protos.errors import ProtocolError
 from protos.http2 import GRPC_INTERNAL, Http2Transport
 from protos.types import ActionTuple, BehaviorSpec, StepResult
 from protos.versions import COMMUNICATION_VERSION, PACKAGE_VERSION, all_true_capabilities
+from trainer.config.env_vars import TRANSPORTS
 from trainer.errors import (
     PortInUseError,
     SimulatorExitedError,
@@ -64,16 +64,6 @@ _STOP_POLL_S = 0.25
 _DELIVERY_WAIT_S = 0.05  # upper bound; normally the RPC completes in well under a millisecond
 SERVICE = "communicator_objects.UnityToExternalProto"
 EXCHANGE_PATH = f"/{SERVICE}/Exchange".encode()
-TRANSPORTS = ("http2", "grpcio")
-TRANSPORT_ENV = "MLAGENTS_LIKE_TRANSPORT"
-
-
-def default_transport() -> str:
-    """``http2`` (our single-threaded server) unless MLAGENTS_LIKE_TRANSPORT says ``grpcio``."""
-    value = os.environ.get(TRANSPORT_ENV, "http2").strip().lower() or "http2"
-    if value not in TRANSPORTS:
-        raise ValueError(f"{TRANSPORT_ENV}={value!r}: use one of {', '.join(TRANSPORTS)}")
-    return value
 
 
 class _PendingCall:
@@ -226,13 +216,14 @@ class UnityEndpoint:
         timeout_wait: float = 60.0,
         is_alive: Callable[[], bool] | None = None,
         describe: str | Callable[[], str] = "",
-        transport: str | None = None,
+        transport: str = "http2",
         spin_wait: float = 0.0,
     ) -> None:
         """``describe``: names the simulator in errors (a callable is asked when the error
         happens, so it can say how the process ended). ``spin_wait`` (s): poll for the simulator's
         next call up to this long past when it is due instead of sleeping through it
-        (protos/pacing.py; HTTP/2 transport only)."""
+        (protos/pacing.py; HTTP/2 transport only). ``transport``: one of TRANSPORTS (the run's
+        MLAGENTS_LIKE_TRANSPORT, trainer.config.env_vars)."""
         self.port = port
         self.bind = bind
         self.timeout_wait = float(timeout_wait)
@@ -241,7 +232,7 @@ class UnityEndpoint:
         self.spin_wait = float(spin_wait)
         self.behavior_specs: dict[str, BehaviorSpec] = {}
         self.init_output = None  # UnityRLInitializationOutputProto from M1
-        self.transport_name = transport or default_transport()
+        self.transport_name = transport
         if self.transport_name not in TRANSPORTS:
             raise ValueError(f"unknown transport {self.transport_name!r}")
         self._transport = None

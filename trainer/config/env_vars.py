@@ -1,0 +1,119 @@
+"""Every ``MLAGENTS_LIKE_*`` environment variable, read once, at start, into one frozen object.
+
+``mlagents-like-learn`` calls ``EnvVars.from_environ()`` first thing (trainer/cli.py), before it
+parses its flags or imports numpy; a bad value is a ConfigError like a bad flag (one message naming
+the variable, its value and what is allowed; exit code 2), raised before the results folder or a
+simulator exists. The object is then handed down to whatever needs one of its values; no other
+module reads these variables. The stub launched by the trainer gets the choices that concern it as
+command-line flags (``--spin-wait-ms``, ``--transport``), never from the environment.
+
+An empty value counts as unset. A variable of the ``MLAGENTS_LIKE_`` family that is not one of these
+is refused too: a typo would otherwise be ignored without a word. Two names belong to the Slurm job
+template (docker/slurm/train.sbatch, docs/cluster.md) and reach the trainer through the job's
+environment: ``MLAGENTS_LIKE_IMAGE`` (run inside that container image) and ``MLAGENTS_LIKE_VENV``
+(the venv to run); the trainer accepts and ignores them.
+
+=============================  ================  ====================================================
+variable                       field             default and meaning
+=============================  ================  ====================================================
+MLAGENTS_LIKE_TORCH_THREADS    ``torch_threads``  1: torch's intra-op threads (trainer/run.py)
+MLAGENTS_LIKE_BLAS_THREADS     ``blas_threads``   None: numpy's BLAS gets 1 thread unless the user set
+                                                 OPENBLAS_NUM_THREADS / OMP_NUM_THREADS /
+                                                 MKL_NUM_THREADS (trainer/cli.py)
+MLAGENTS_LIKE_SPIN_WAIT_MS     ``spin_wait_s``    1 ms: how long a waiting side polls past the expected
+                                                 answer; 0 always sleeps (protos/pacing.py)
+MLAGENTS_LIKE_TRANSPORT        ``transport``      http2: the gRPC transport of the trainer's server and
+                                                 of the stubs it launches; or grpcio
+MLAGENTS_LIKE_NUMPY_UPDATE     ``numpy_update``   1: PPO's minibatch steps in numpy where the network
+                                                 allows it; 0 keeps torch autograd (trainer/ppo)
+=============================  ================  ====================================================
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass
+from typing import Mapping
+
+from trainer.errors import ConfigError
+
+PREFIX = "MLAGENTS_LIKE_"
+TORCH_THREADS = PREFIX + "TORCH_THREADS"
+BLAS_THREADS = PREFIX + "BLAS_THREADS"
+SPIN_WAIT_MS = PREFIX + "SPIN_WAIT_MS"
+TRANSPORT = PREFIX + "TRANSPORT"
+NUMPY_UPDATE = PREFIX + "NUMPY_UPDATE"
+KNOWN = (TORCH_THREADS, BLAS_THREADS, SPIN_WAIT_MS, TRANSPORT, NUMPY_UPDATE)
+JOB_TEMPLATE_ONLY = (PREFIX + "IMAGE", PREFIX + "VENV")  # read by docker/slurm/train.sbatch only
+
+TRANSPORTS = ("http2", "grpcio")  # the gRPC transports of trainer/protocol/server.py
+DEFAULT_SPIN_WAIT_S = 1.0e-3
+
+
+@dataclass(frozen=True)
+class EnvVars:
+    """The run's ``MLAGENTS_LIKE_*`` choices (defaults: none of the variables set)."""
+
+    torch_threads: int = 1
+    blas_threads: int | None = None  # None: 1, unless the user set OpenBLAS/OpenMP/MKL's own
+    spin_wait_s: float = DEFAULT_SPIN_WAIT_S
+    transport: str = "http2"
+    numpy_update: bool = True
+
+    @classmethod
+    def from_environ(cls, environ: Mapping[str, str] = os.environ) -> "EnvVars":
+        """The choices in ``environ``; ConfigError naming the first bad or unknown variable."""
+        unknown = sorted(name for name in environ if name.startswith(PREFIX)
+                         and name not in KNOWN and name not in JOB_TEMPLATE_ONLY)
+        if unknown:
+            raise ConfigError(f"{unknown[0]}={environ[unknown[0]]!r} is not a variable mlagents-like-learn "
+                              f"knows; unset it (known: {', '.join(KNOWN)}).")
+        values = {name: environ.get(name, "").strip() for name in KNOWN}
+        blas = values[BLAS_THREADS]
+        return cls(
+            torch_threads=_threads(TORCH_THREADS, values[TORCH_THREADS], "torch's threads for the networks")
+            if values[TORCH_THREADS] else 1,
+            blas_threads=_threads(BLAS_THREADS, blas, "numpy's BLAS threads") if blas else None,
+            spin_wait_s=_spin_wait_s(values[SPIN_WAIT_MS]),
+            transport=_transport(values[TRANSPORT]),
+            numpy_update=_numpy_update(values[NUMPY_UPDATE]),
+        )
+
+
+def _threads(name: str, value: str, what: str) -> int:
+    if re.fullmatch(r"[0-9]+", value) and int(value) >= 1:
+        return int(value)
+    raise ConfigError(f"{name}={value!r} is not a whole number >= 1 ({what}); use e.g. {name}=2, "
+                      f"or unset it for the default.")
+
+
+def _spin_wait_s(value: str) -> float:
+    if not value:
+        return DEFAULT_SPIN_WAIT_S
+    try:
+        ms = float(value)
+    except ValueError:
+        ms = math.nan
+    if not 0.0 <= ms < math.inf:
+        raise ConfigError(f"{SPIN_WAIT_MS}={value!r} is not a number of milliseconds >= 0; "
+                          f"use e.g. {SPIN_WAIT_MS}=1, or 0 to always sleep while waiting.")
+    return ms / 1e3
+
+
+def _transport(value: str) -> str:
+    if not value:
+        return "http2"
+    if value.lower() in TRANSPORTS:
+        return value.lower()
+    raise ConfigError(f"{TRANSPORT}={value!r} is not a transport; use {TRANSPORT}=http2 (the default) "
+                      f"or {TRANSPORT}=grpcio.")
+
+
+def _numpy_update(value: str) -> bool:
+    if value in ("", "1"):
+        return True
+    if value == "0":
+        return False
+    raise ConfigError(f"{NUMPY_UPDATE}={value!r} is neither 0 nor 1; use {NUMPY_UPDATE}=1 (the default: "
+                      f"minibatch updates in numpy) or {NUMPY_UPDATE}=0 (torch autograd).")
