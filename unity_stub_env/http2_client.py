@@ -2,7 +2,7 @@
 
 What a simulator needs to call ``Exchange`` like Unity's gRPC client does, without gRPC's
 threads (grpcio's client is the other choice, ``communicator._GrpcioChannel``). The framing
-(frames, HPACK helpers, limits) is shared with the trainer's server in ``trainer/protocol/http2.py``.
+(frames, HPACK helpers, limits) is shared with the trainer's server in ``protos/http2.py``.
 
     channel = Http2Channel("localhost", 5005, b"/pkg.Service/Method")
     channel.connect(timeout=1.0)       # False while nothing listens

@@ -1,6 +1,6 @@
 """The trainer's gRPC server on python-hyper's ``h2`` state machine: measured, not used.
 
-``bench/transport.py`` compares it with the hand-written framing of ``trainer/protocol/http2.py``
+``bench/transport.py`` compares it with the hand-written framing of ``protos/http2.py``
 (and with grpcio). Same interface and threading as ``http2.Http2Transport``, which it extends
 (listener, ``take`` with pacing, ``poll``, ``close``); only each connection's frame handling is
 ``h2``'s: it parses and validates every frame (RFC 9113), keeps both flow-control windows and
