@@ -59,14 +59,6 @@ class ActionSpec:
     def discrete_size(self) -> int:
         return len(self.discrete_branches)
 
-    @property
-    def is_continuous(self) -> bool:
-        return self.continuous_size > 0 and not self.discrete_branches
-
-    @property
-    def is_discrete(self) -> bool:
-        return self.continuous_size == 0 and len(self.discrete_branches) > 0
-
     def empty_action(self, n: int) -> "ActionTuple":
         return ActionTuple(
             np.zeros((n, self.continuous_size), dtype=np.float32),

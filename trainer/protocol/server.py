@@ -69,13 +69,12 @@ EXCHANGE_PATH = f"/{SERVICE}/Exchange".encode()
 class _PendingCall:
     """One Exchange call the simulator is blocked in (grpcio transport), and its answer."""
 
-    __slots__ = ("payload", "response", "error", "abandoned", "_answered", "finished")
+    __slots__ = ("payload", "response", "error", "_answered", "finished")
 
     def __init__(self, payload: bytes) -> None:
         self.payload = payload
         self.response: bytes | None = None
         self.error: tuple[grpc.StatusCode, str] | None = None
-        self.abandoned = False
         self._answered = threading.Event()
         self.finished = threading.Event()  # the RPC is over: the answer has left this process
 
@@ -97,7 +96,6 @@ class _PendingCall:
         self._answered.set()
 
     def abandon(self) -> None:
-        self.abandoned = True
         self._answered.set()
 
     def wait(self, timeout: float) -> bool:
