@@ -97,6 +97,7 @@ class BehaviorRunner:
     returns_since_checkpoint: list[float] = field(default_factory=list)
     last_checkpoint_step: int = -1
     resumed_next_summary: int | None = None  # from the checkpoint's "Summaries" entry (--resume)
+    writes_files: bool = True  # False on data-parallel ranks other than 0 (trainer/distributed.py)
 
     @classmethod
     def create(cls, brain: str, spec: BehaviorSpec, settings, run_dir: str, seed: int, device: str,
@@ -165,7 +166,8 @@ class BehaviorRunner:
         if self.done:  # inference, or past max_steps while other behaviors still train
             return {}
         if self.trainer.step + len(traj) >= self.next_checkpoint:
-            self.save_checkpoint(status)
+            if self.writes_files:
+                self.save_checkpoint(status)
             while self.next_checkpoint <= self.trainer.step + len(traj):
                 self.next_checkpoint += self.checkpoint_interval
         return self.trainer.process_trajectory(traj)

@@ -34,6 +34,7 @@ from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
 from trainer.config.support import goal_conditioning_note
 from trainer.curriculum import EnvironmentParameterManager
+from trainer.distributed import RankLost, Ranks
 from trainer.envs.pool import EnvPool, PoolSettings
 from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
 from trainer.rollout import AgentTracker, concat_masks
@@ -120,6 +121,7 @@ class RunState:
     progress: ProgressLine
     routers: list[sc.SideChannelRouter]
     env_vars: EnvVars = field(default_factory=EnvVars)
+    ranks: Ranks = field(default_factory=Ranks)  # data-parallel ranks (trainer/distributed.py)
     runners: dict[str, BehaviorRunner] = field(default_factory=dict)
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
     pending_reset: bool = False
@@ -150,11 +152,14 @@ class RunState:
         runner = BehaviorRunner.create(brain, spec, settings, self.run_dir, seed,
                                        opts.torch_settings.device or "cpu", training=not ck.inference,
                                        use_numpy_update=self.env_vars.numpy_update)
-        if ck.resume or (ck.inference and os.path.isfile(runner.paths.latest)):
+        if not self.ranks.is_main:
+            pass  # rank 0 restores and sends its state to this rank (Ranks.agree)
+        elif ck.resume or (ck.inference and os.path.isfile(runner.paths.latest)):
             runner.restore(runner.paths.latest, reset_step=False)
         elif settings.init_path:
             runner.restore(settings.init_path, reset_step=True)
         runner.schedule_from_step()
+        self.ranks.adopt(runner)
         if ck.resume and not ck.inference:
             # what a run killed without warning wrote after its last checkpoint is void
             self.reporter.resume_from(brain, runner.next_summary - 1)
@@ -263,10 +268,13 @@ class RunState:
             checkpointed = checkpointed or runner.last_checkpoint_step != before
             for key, value in stats.items():
                 self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
-        for runner in self.runners.values():
-            if not runner.done and runner.trainer.ready_to_update():
+        with self.timers.scope("ranks.agree"):
+            updates = self.ranks.agree(self.runners)  # {brain: rows} to update now; alone: who is ready
+        for brain, runner in sorted(self.runners.items()):  # one order on every rank
+            if brain in updates:
                 with self.timers.scope("update"):
-                    stats = runner.trainer.update()
+                    stats = runner.trainer.update(updates[brain])
+                self.ranks.after_update(runner)
                 for key, value in stats.items():
                     self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
             self._maybe_summarize(runner)
@@ -294,12 +302,13 @@ class RunState:
             self.reporter.add(runner.brain, f"Environment/Lesson Number/{name}", float(lesson),
                               StatsAggregationMethod.MOST_RECENT)
         self.reporter.set(runner.brain, "Step", float(runner.trainer.step))  # hidden from TensorBoard, a gauge
+        self.ranks.gather_stats(self.reporter, runner.brain)
         self.reporter.write(runner.brain, runner.next_summary, is_training=runner.training and not runner.done)
 
     def summarize_partial(self) -> None:
         """A stop before max_steps: the summary of the unfinished period now, under its label, so
         the resumed run (which starts with the next period) neither repeats nor skips a label."""
-        for runner in self.runners.values():
+        for _, runner in sorted(self.runners.items()):  # one order on every rank
             period_start = runner.next_summary - runner.settings.summary_freq
             if runner.training and not runner.done and runner.trainer.step > period_start:
                 logger.info("%s: summary of the unfinished period up to step %d, labelled %d.",
@@ -408,6 +417,11 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
     env_vars = env_vars or EnvVars()
     ck = options.checkpoint_settings
     env = options.env_settings
+    rank, world = env_vars.ranks.rank, env_vars.ranks.world_size
+    main = rank == 0  # data-parallel ranks: rank 0 alone writes files (trainer/distributed.py)
+    if world > 1 and not env.env_path:
+        raise UserError(f"{world} data-parallel ranks need --env: each rank launches its own simulators "
+                        "(the Unity Editor is one environment).")
     pool_settings = PoolSettings(
         env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
         num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,
@@ -416,24 +430,31 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         log_folder=os.path.abspath(os.path.join(run_dir_of(options), "run_logs")),
         max_lifetime_restarts=env.max_lifetime_restarts, restarts_rate_limit_n=env.restarts_rate_limit_n,
         restarts_rate_limit_period_s=env.restarts_rate_limit_period_s, debug=options.debug,
-        spin_wait_s=env_vars.spin_wait_s, transport=env_vars.transport,
+        spin_wait_s=env_vars.spin_wait_s, transport=env_vars.transport, first_worker=rank * env.num_envs,
     )
     state: RunState | None = None
     # resolves --env first: a wrong path must not leave a results folder that blocks the rerun
     pool = EnvPool(pool_settings, initial_side_channel=lambda: state.initial_side_channel())
-    run_dir = prepare_run_dir(options)
+    if main:
+        run_dir = prepare_run_dir(options)
+    else:
+        run_dir = run_dir_of(options)
+        os.makedirs(os.path.join(run_dir, "run_logs"), exist_ok=True)  # this rank's simulators' logs
     status_path = os.path.join(run_dir, "run_logs", "training_status.json")
     keep_status = (ck.resume or ck.inference) and os.path.isfile(status_path)
     status = TrainingStatus.load(status_path) if keep_status else TrainingStatus()
     restore = {p: status.get_lesson_num(p) for p in options.environment_parameters} if ck.resume else None
     params = EnvironmentParameterManager(options.environment_parameters, env.seed,
                                          {k: v for k, v in (restore or {}).items() if v is not None})
-    progress = ProgressLine(sys.stderr)
-    tb = TensorboardWriter(run_dir, clear_past_data=ck.force and not ck.resume)
+    progress = ProgressLine(sys.stderr if main else open(os.devnull, "w"))
     timers = TimerTree(argv=sys.argv)
-    # as mlagents-learn: every summary also lands in timers.json as gauges (<Behavior>.<tag>.mean/.sum)
-    reporter = StatsReporter([tb, ConsoleWriter(logger, progress=progress), GaugeWriter(timers)])
-    write_run_options(options, run_dir)
+    writers = []
+    if main:
+        tb = TensorboardWriter(run_dir, clear_past_data=ck.force and not ck.resume)
+        # as mlagents-learn: every summary also lands in timers.json as gauges (<Behavior>.<tag>.mean/.sum)
+        writers = [tb, ConsoleWriter(logger, progress=progress), GaugeWriter(timers)]
+        write_run_options(options, run_dir)
+    reporter = StatsReporter(writers)
     state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
                      make_routers(env.num_envs), env_vars)
     for line in params.describe():
@@ -444,6 +465,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         # while the simulators boot: import torch and the networks (seconds, on a small machine)
         configure_torch_threads(env_vars.torch_threads)
         check_torch_device(options.torch_settings.device)
+        state.ranks = Ranks.start(env_vars, options.torch_settings.device)
         import trainer.behavior  # noqa: F401
         STOP.check()
         pool.connect()
@@ -479,6 +501,9 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
     except UnityCommunicatorStoppedError:
         logger.info("The simulator closed the connection. Learning was interrupted. "
                     "Please wait while the graph is generated.")
+    except RankLost as lost:  # trainer/distributed.py: handled like a stop signal
+        stopped = True
+        logger.warning("%s. Learning was interrupted; rank 0 writes the final checkpoint.", lost)
     finally:
         state.progress.close()
         # a stop signal also counts when the simulators, signalled with the trainer (scancel, a
@@ -490,6 +515,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
             finish_run(state)
         finally:
             pool.close()
+            state.ranks.close()
     if stopped and not ck.inference and not state.finished:
         logger.info("Stopped before max_steps (exit status %d); continue this run with --resume.", EXIT_STOPPED)
         return EXIT_STOPPED
@@ -498,6 +524,8 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
 
 def finish_run(state: RunState) -> None:
     """Final checkpoint + ONNX per brain, training_status.json, timers.json, configuration.yaml."""
+    if not state.ranks.is_main:
+        return  # rank 0 writes every file
     run_dir = state.run_dir
     for runner in state.runners.values():
         if runner.training and runner.trainer.step > 0:

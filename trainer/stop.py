@@ -31,6 +31,9 @@ class StopRequests:
         self.requested: str | None = None  # name of the first signal received
         self.received = 0
         self.raised = False
+        # data-parallel ranks (trainer/distributed.py): ``check`` leaves the stop to the ranks'
+        # agreement, so that all of them stop at the same exchange
+        self.deferred = False
 
     def install(self) -> None:
         """Route the stop signals here (main thread only)."""
@@ -55,12 +58,12 @@ class StopRequests:
 
     def check(self) -> None:
         """Raise GracefulStop once, at a safe point, if a stop was requested."""
-        if self.requested is not None and not self.raised:
+        if self.requested is not None and not self.raised and not self.deferred:
             self.raised = True
             raise GracefulStop(self.requested)
 
     def reset(self) -> None:
-        self.requested, self.received, self.raised = None, 0, False
+        self.requested, self.received, self.raised, self.deferred = None, 0, False, False
 
 
 # One per process, like the signal handlers themselves; the trainer's wait loops consult it.

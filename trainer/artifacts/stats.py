@@ -130,6 +130,27 @@ class _KeyAccumulator:
         if self.aggregation == StatsAggregationMethod.HISTOGRAM:
             self.scalars.append(value)
 
+    def merge_from(self, other: "_KeyAccumulator") -> None:
+        """Fold another accumulator of the same key in (Chan et al.'s parallel merge); a
+        MOST_RECENT key keeps its own value when it has one (data-parallel ranks,
+        trainer/distributed.py, bring each rank's stats to rank 0 this way)."""
+        if other.count == 0:
+            return
+        if self.aggregation == StatsAggregationMethod.MOST_RECENT:
+            if self.count == 0:
+                self.count, self.mean, self.m2, self.total, self.last = 1, other.last, 0.0, other.last, other.last
+            return
+        new_count = self.count + other.count
+        delta = other.mean - self.mean
+        self.m2 += other.m2 + delta * delta * self.count * other.count / new_count
+        self.mean += delta * other.count / new_count
+        self.count = new_count
+        self.total += other.total
+        if self.aggregation == StatsAggregationMethod.HISTOGRAM:
+            self._flush_scalars()
+            other._flush_scalars()
+            self.chunks.extend(other.chunks)
+
     def summary(self) -> StatsSummary:
         self._flush_scalars()
         if self.chunks:
@@ -203,6 +224,11 @@ class StatsAggregator:
 
     def clear(self) -> None:
         self._keys.clear()
+
+    def merge_from(self, other: "StatsAggregator") -> None:
+        """Fold every key of ``other`` in (``_KeyAccumulator.merge_from``)."""
+        for key, acc in other._keys.items():
+            self._accumulator(key, acc.aggregation).merge_from(acc)
 
     def __len__(self) -> int:
         return len(self._keys)
@@ -287,6 +313,16 @@ class StatsReporter:
                         continue
                     for brain in brain_list:
                         self.aggregator(brain).add(key, value, aggregation)
+
+    def take(self, brain: str) -> StatsAggregator:
+        """The brain's stats so far, handed over: this reporter starts afresh for it."""
+        with self._lock:
+            return self._aggregators.pop(brain, None) or StatsAggregator()
+
+    def merge(self, brain: str, other: StatsAggregator) -> None:
+        """Fold stats recorded elsewhere (another rank's ``take``) into the brain's."""
+        with self._lock:
+            self.aggregator(brain).merge_from(other)
 
     def write(self, brain: str, step: int, is_training: bool | None = None) -> None:
         """Hand the brain's summaries to every writer, then clear them.

@@ -26,7 +26,18 @@ MLAGENTS_LIKE_TRANSPORT        ``transport``      http2: the gRPC transport of t
                                                  of the stubs it launches; or grpcio
 MLAGENTS_LIKE_NUMPY_UPDATE     ``numpy_update``   1: PPO's minibatch steps in numpy where the network
                                                  allows it; 0 keeps torch autograd (trainer/ppo)
+MLAGENTS_LIKE_DIST_TIMEOUT_S   ``dist_timeout_s`` 300: seconds a rank waits for the others in a
+                                                 collective before it gives up (trainer/distributed.py)
+MLAGENTS_LIKE_DEBUG_WEIGHTS    ``debug_weights``  None: a path; each rank r of a data-parallel run
+                                                 appends a hash of its weights after every update
+                                                 to PATH.rank<r> (the tests compare them)
 =============================  ================  ====================================================
+
+Data-parallel ranks (docs/cluster.md) are found from variables of other families, read here too:
+torchrun's ``RANK``, ``WORLD_SIZE``, ``LOCAL_RANK``, ``MASTER_ADDR``, ``MASTER_PORT`` first, else
+the tasks of an ``srun`` step: ``SLURM_PROCID``, ``SLURM_STEP_NUM_TASKS``, ``SLURM_LOCALID``,
+``SLURM_JOB_NODELIST`` and ``SLURM_JOB_ID`` (MASTER_ADDR / MASTER_PORT are derived from the last
+two when not set). A batch script alone (no srun step) is one rank, however many tasks it asked for.
 """
 from __future__ import annotations
 
@@ -44,11 +55,60 @@ BLAS_THREADS = PREFIX + "BLAS_THREADS"
 SPIN_WAIT_MS = PREFIX + "SPIN_WAIT_MS"
 TRANSPORT = PREFIX + "TRANSPORT"
 NUMPY_UPDATE = PREFIX + "NUMPY_UPDATE"
-KNOWN = (TORCH_THREADS, BLAS_THREADS, SPIN_WAIT_MS, TRANSPORT, NUMPY_UPDATE)
+DIST_TIMEOUT_S = PREFIX + "DIST_TIMEOUT_S"
+DEBUG_WEIGHTS = PREFIX + "DEBUG_WEIGHTS"
+KNOWN = (TORCH_THREADS, BLAS_THREADS, SPIN_WAIT_MS, TRANSPORT, NUMPY_UPDATE, DIST_TIMEOUT_S, DEBUG_WEIGHTS)
 JOB_TEMPLATE_ONLY = (PREFIX + "IMAGE", PREFIX + "VENV")  # read by docker/slurm/train.sbatch only
 
 TRANSPORTS = ("http2", "grpcio")  # the gRPC transports of trainer/protocol/server.py
 DEFAULT_SPIN_WAIT_S = 1.0e-3
+DEFAULT_DIST_TIMEOUT_S = 300.0
+
+
+@dataclass(frozen=True)
+class RankEnv:
+    """Where this process is in a data-parallel run, as its launcher said (defaults: alone).
+    ``job_nodelist`` / ``job_id``: Slurm's, for MASTER_ADDR / MASTER_PORT when those are unset
+    (trainer/distributed.py resolves them)."""
+
+    rank: int = 0
+    world_size: int = 1
+    local_rank: int = 0
+    master_addr: str | None = None
+    master_port: int | None = None
+    job_nodelist: str | None = None
+    job_id: int | None = None
+    launcher: str = "none"  # "torchrun" (RANK/WORLD_SIZE), "srun" (SLURM_PROCID/...) or "none"
+
+    @classmethod
+    def from_environ(cls, environ: Mapping[str, str]) -> "RankEnv":
+        get = lambda name: environ.get(name, "").strip()  # noqa: E731
+        if get("WORLD_SIZE") and get("RANK"):
+            launcher, rank, world, local = "torchrun", get("RANK"), get("WORLD_SIZE"), get("LOCAL_RANK") or "0"
+        elif get("SLURM_STEP_NUM_TASKS") and get("SLURM_PROCID"):
+            launcher, rank, world = "srun", get("SLURM_PROCID"), get("SLURM_STEP_NUM_TASKS")
+            local = get("SLURM_LOCALID") or "0"
+        else:
+            return cls()
+        names = ("RANK", "WORLD_SIZE", "LOCAL_RANK") if launcher == "torchrun" else (
+            "SLURM_PROCID", "SLURM_STEP_NUM_TASKS", "SLURM_LOCALID")
+        numbers = []
+        for name, value in zip(names, (rank, world, local)):
+            if not re.fullmatch(r"[0-9]+", value):
+                raise ConfigError(f"{name}={value!r} is not a whole number >= 0; the launcher ({launcher}) "
+                                  f"sets it: start the ranks with torchrun or srun, or unset it.")
+            numbers.append(int(value))
+        rank_n, world_n, local_n = numbers
+        if world_n < 1 or rank_n >= world_n:
+            raise ConfigError(f"{names[0]}={rank_n} does not fit {names[1]}={world_n} (a rank is 0 .. world size"
+                              f" - 1); start the ranks with torchrun or srun, or unset them.")
+        port = get("MASTER_PORT")
+        if port and not (re.fullmatch(r"[0-9]+", port) and 0 < int(port) < 65536):
+            raise ConfigError(f"MASTER_PORT={port!r} is not a port number (1-65535); set another or unset it.")
+        job = get("SLURM_JOB_ID")
+        return cls(rank=rank_n, world_size=world_n, local_rank=local_n, master_addr=get("MASTER_ADDR") or None,
+                   master_port=int(port) if port else None, job_nodelist=get("SLURM_JOB_NODELIST") or None,
+                   job_id=int(job) if re.fullmatch(r"[0-9]+", job) else None, launcher=launcher)
 
 
 @dataclass(frozen=True)
@@ -60,6 +120,9 @@ class EnvVars:
     spin_wait_s: float = DEFAULT_SPIN_WAIT_S
     transport: str = "http2"
     numpy_update: bool = True
+    dist_timeout_s: float = DEFAULT_DIST_TIMEOUT_S
+    debug_weights: str | None = None
+    ranks: RankEnv = RankEnv()
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str] = os.environ) -> "EnvVars":
@@ -78,6 +141,9 @@ class EnvVars:
             spin_wait_s=_spin_wait_s(values[SPIN_WAIT_MS]),
             transport=_transport(values[TRANSPORT]),
             numpy_update=_numpy_update(values[NUMPY_UPDATE]),
+            dist_timeout_s=_seconds(DIST_TIMEOUT_S, values[DIST_TIMEOUT_S], DEFAULT_DIST_TIMEOUT_S),
+            debug_weights=values[DEBUG_WEIGHTS] or None,
+            ranks=RankEnv.from_environ(environ),
         )
 
 
@@ -117,3 +183,16 @@ def _numpy_update(value: str) -> bool:
         return False
     raise ConfigError(f"{NUMPY_UPDATE}={value!r} is neither 0 nor 1; use {NUMPY_UPDATE}=1 (the default: "
                       f"minibatch updates in numpy) or {NUMPY_UPDATE}=0 (torch autograd).")
+
+
+def _seconds(name: str, value: str, default: float) -> float:
+    if not value:
+        return default
+    try:
+        seconds = float(value)
+    except ValueError:
+        seconds = math.nan
+    if not 0.0 < seconds < math.inf:
+        raise ConfigError(f"{name}={value!r} is not a number of seconds > 0; use e.g. {name}={default:g}, "
+                          f"or unset it for the default.")
+    return seconds

@@ -47,6 +47,9 @@ class PoolSettings:
     debug: bool = False
     spin_wait_s: float = DEFAULT_SPIN_WAIT_S  # MLAGENTS_LIKE_SPIN_WAIT_MS (trainer.config.env_vars)
     transport: str = "http2"  # MLAGENTS_LIKE_TRANSPORT: the server's and the launched stubs'
+    # data-parallel rank r numbers its workers from r x num_envs (trainer/distributed.py): their
+    # ports (base + id), seeds (seed + id) and logs (Player-<id>.log) differ from every other rank's
+    first_worker: int = 0
 
 
 @dataclass
@@ -116,7 +119,8 @@ class EnvPool:
         self.settings = settings
         # waiting sides poll instead of sleeping only if the trainer and every simulator have a CPU
         spin_wait = spin_budget(settings.num_envs + 1, settings.spin_wait_s)
-        self.workers = [_Worker(i, settings, env_path, spin_wait) for i in range(settings.num_envs)]
+        self.workers = [_Worker(settings.first_worker + i, settings, env_path, spin_wait)
+                        for i in range(settings.num_envs)]
         self._initial_side_channel = initial_side_channel
         # each worker has its own restart quota, as in ML-Agents: two simulators that crash in the
         # same minute are both restarted under the default limit of 1 per 60 s
@@ -199,7 +203,7 @@ class EnvPool:
         their last message, the restarted ones for their first RESET. Repeats if one dies again."""
         while failed:
             for w, err in failed:
-                if w.process is None or not self._restarts[w.worker_id].allow_restart(time.monotonic()):
+                if w.process is None or not self._restarts[w.worker_id - self.settings.first_worker].allow_restart(time.monotonic()):
                     raise err
                 logger.warning("Worker %d failed (%s); restarting it and resetting all environments.",
                                w.worker_id, err)

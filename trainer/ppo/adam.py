@@ -62,6 +62,9 @@ class Adam:
             if not all(np.may_share_memory(a, p.detach().numpy()) for a, p in zip(self.arrays, self.params)):
                 raise ValueError("Adam needs parameters whose elements are dense in memory (no views with gaps)")
         self._all = Stretch(self, 0, len(self.params))
+        # data-parallel ranks (trainer/distributed.py): averages a step's flat gradient buffer
+        # across the ranks, in place, just before the step uses it; None alone (no cost)
+        self.reduce = None
 
     def flat(self, array: np.ndarray, index: int) -> np.ndarray:
         """``array`` shaped as parameter ``index``, flat in that parameter's memory order (a view
@@ -171,6 +174,8 @@ class Stretch:
         g, flat = self._grad, self.adam.flat
         for index, (grad, (start, end)) in enumerate(zip(grads, self.bounds), self.first):
             g[start:end] = flat(grad, index)
+        if self.adam.reduce is not None:
+            self.adam.reduce(g)
         m, v = self.exp_avg, self.exp_avg_sq
         step = np.subtract(g, m, out=self._scratch)  # m += (1 - beta1) * (g - m)
         step *= 1 - beta1

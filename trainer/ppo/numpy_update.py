@@ -113,6 +113,8 @@ class NumpyPPO:
         """One step per minibatch (row indices ``orders``) at ``learning_rate``; ``parallel``:
         the critic's half in a forked child process; None: when ``fork_pays_off``. Returns each
         minibatch's statistics."""
+        if self.optimizer.reduce is not None:  # data-parallel ranks
+            return self._run_together(data, actor_in, critic_in, orders, learning_rate, beta, epsilon)
         if parallel is None:
             parallel = not self.fork_failed and fork_pays_off(sum(map(len, orders)) * self.critic_part.exp_avg.size)
         self.optimizer.param_groups[0]["lr"] = learning_rate
@@ -150,6 +152,31 @@ class NumpyPPO:
         self.optimizer.step_count = first_t - 1 + len(orders)
         return [_stats(policy_term, value_term, entropy)
                 for (policy_term, entropy), value_term in zip(actor, values)]
+
+    def _run_together(self, data: dict[str, np.ndarray], actor_in: np.ndarray, critic_in: np.ndarray,
+                      orders: list[np.ndarray], learning_rate: float, beta: float, epsilon: float
+                      ) -> list[dict[str, float]]:
+        """``run`` for data-parallel ranks (trainer/distributed.py): each minibatch's actor and
+        critic gradients go into ONE buffer, averaged across the ranks by the optimizer's
+        ``reduce`` (one all-reduce per minibatch, not two), then one Adam step of both networks:
+        the same arithmetic as ``run``'s separate halves (Adam is elementwise). No child process:
+        it could not take part in the ranks' collectives."""
+        self.optimizer.param_groups[0]["lr"] = learning_rate
+        first_t = self.optimizer.step_count + 1
+        both = self.optimizer.stretch([*self.actor_part.params, *self.critic_part.params])
+        actor_keys = [k for k in self.ACTOR_KEYS if k in data]
+        critic_keys = [f"returns:{name}" for name in self.critic.heads]
+        results = []
+        for k, index in enumerate(orders):
+            grads, policy_term, entropy = self.actor_gradients(
+                {key: data[key][index] for key in actor_keys}, actor_in[index], beta, epsilon)
+            critic_grads, value_term = self.critic_gradients(
+                {key: data[key][index] for key in critic_keys}, critic_in[index])
+            grads.update(critic_grads)
+            both.step([grads[id(p)] for p in both.params], first_t + k)
+            results.append(_stats(policy_term, value_term, entropy))
+        self.optimizer.step_count = first_t - 1 + len(orders)
+        return results
 
     # ------------------------------------------------------------------ one minibatch
     def actor_step(self, batch: dict[str, np.ndarray], actor_in: np.ndarray, beta: float, epsilon: float,

@@ -91,6 +91,7 @@ class PPOTrainer:
         self._numpy_critic = NumpyCritic(self.critic) if (
             numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
         self._numpy_ppo: numpy_update.NumpyPPO | None = None  # built at the first numpy update
+        self._rows: int | None = None  # ``update``'s rows
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays: list[np.ndarray]) -> list[torch.Tensor]:
@@ -269,8 +270,13 @@ class PPOTrainer:
             "Policy/Entropy": masked_mean(entropy, mask).item(),
         }
 
-    def update(self) -> dict[str, float]:
-        """num_epoch passes of shuffled minibatches over ALL buffered experiences; then clear the buffer."""
+    def update(self, rows: int | None = None) -> dict[str, float]:
+        """num_epoch passes of shuffled minibatches over ALL buffered experiences; then clear the buffer.
+
+        ``rows``: data-parallel ranks (trainer/distributed.py) must all take the same number of
+        minibatch steps: each epoch then shuffles the whole buffer but steps only the minibatches
+        that ``rows`` experiences (the smallest buffer of all ranks) fill."""
+        self._rows = rows
         learning_rate, beta, epsilon = self.current_schedule()
         for group in self.optimizer.param_groups:
             group["lr"] = learning_rate
@@ -316,13 +322,14 @@ class PPOTrainer:
         With memory the shuffle moves whole sequences and batch_size is rounded down to a multiple
         of sequence_length (at least one sequence), as in the reference."""
         length, step = len(self.buffer), self.sequence_length
+        rows = min(length, self._rows or length)
         batch_size = max(self.hyperparams.batch_size - self.hyperparams.batch_size % step, step)
         within = torch.arange(step)
         for _ in range(self.hyperparams.num_epoch):
             order = torch.randperm(length // step, generator=self.shuffle_generator)
             if step > 1:
                 order = (order[:, None] * step + within).reshape(-1)
-            for start in range(0, (length // batch_size) * batch_size, batch_size):
+            for start in range(0, (rows // batch_size) * batch_size, batch_size):
                 yield order[start:start + batch_size]
 
     def _update_numpy(self, learning_rate: float, beta: float, epsilon: float,
@@ -362,6 +369,26 @@ class PPOTrainer:
         return result
 
     # ------------------------------------------------------------------ persistence
+    def optimizers(self) -> list[Adam]:
+        """Every optimiser of this brain: PPO's, then each curiosity / rnd learner's."""
+        return [self.optimizer, *(p.optimizer for p in self.providers.values() if hasattr(p, "optimizer"))]
+
+    def normalizers(self) -> list:
+        """Every observation normaliser of the actor, the critic and the curiosity / rnd networks
+        (a shared body's once), in a fixed order."""
+        from trainer.ppo.normalizer import Normalizer
+
+        modules = [self.policy.actor, self.critic]
+        modules += [getattr(p, name) for p in self.providers.values() for name in ("network", "target", "predictor")
+                    if isinstance(getattr(p, name, None), torch.nn.Module)]
+        seen, found = set(), []
+        for module in modules:
+            for m in module.modules():
+                if isinstance(m, Normalizer) and id(m) not in seen:
+                    seen.add(id(m))
+                    found.append(m)
+        return found
+
     def state_dict(self) -> dict[str, Any]:
         """checkpoint.pt content: ML-Agents' keys plus ``RNG`` (generator states as uint8 tensors).
 
