@@ -176,8 +176,8 @@ class Ranks:
                 os.environ["GLOO_SOCKET_IFNAME"] = interface
         if r.rank != 0:  # one console: rank 0's (warnings and errors of every rank still show)
             logger.setLevel(logging.WARNING)
-        logger.info("Rank %d of %d (%s, %s): waiting for the other ranks at %s.", r.rank, r.world_size,
-                    r.launcher, backend, init)
+        logger.info("Rank %d of %d (%s, %s over %s): waiting for the other ranks at %s.", r.rank, r.world_size,
+                    r.launcher, backend, os.environ.get("GLOO_SOCKET_IFNAME", "the default interface"), init)
         try:
             dist.init_process_group(backend, init_method=init, rank=r.rank, world_size=r.world_size,
                                     timeout=timeout)

@@ -1,0 +1,85 @@
+"""Data-parallel ranks under a real srun (docker/slurm/train.sbatch with --ntasks=2): both ranks
+train the stub task, both contribute experience (counted by rank 0 and written to TensorBoard),
+and after every update the two ranks' weights hash the same (MLAGENTS_LIKE_DEBUG_WEIGHTS).
+On two nodes (network namespaces) the gradients cross a veth pair and a bridge."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from tests.slurm.cluster import ROOT
+
+pytestmark = pytest.mark.slurm
+
+TEMPLATE = "docker/slurm/train.sbatch"
+MAX_STEPS, BUFFER = 2000, 128
+CONFIG = f"""
+behaviors:
+  Basic:
+    trainer_type: ppo
+    hyperparameters: {{batch_size: 32, buffer_size: {BUFFER}, learning_rate: 3.0e-4, beta: 5.0e-3,
+                      epsilon: 0.2, lambd: 0.95, num_epoch: 3}}
+    network_settings: {{normalize: true, hidden_units: 20, num_layers: 1}}
+    reward_signals: {{extrinsic: {{gamma: 0.9, strength: 1.0}}}}
+    checkpoint_interval: 1000
+    max_steps: {MAX_STEPS}
+    time_horizon: 3
+    summary_freq: 500
+"""
+
+
+def hashes(path: Path) -> list[tuple[str, ...]]:
+    return [tuple(line.split()) for line in path.read_text().splitlines()]
+
+
+def run_two_ranks(cluster, tmp_path: Path, *sbatch_args: str) -> tuple[str, Path]:
+    cfg = tmp_path / "basic.yaml"
+    cfg.write_text(CONFIG)
+    weights = tmp_path / "weights"
+    env = {**cluster.env, "MLAGENTS_LIKE_DEBUG_WEIGHTS": str(weights)}
+    job = cluster.run("sbatch", "--parsable", "--mem=1G", "--cpus-per-task=1", *sbatch_args,
+                      f"--output={tmp_path}/slurm-%j.out", TEMPLATE, str(cfg), "--env", "stub:basic",
+                      "--seed", "1", "--results-dir", str(tmp_path / "results"), "--run-id", "ranks",
+                      env=env, cwd=ROOT).stdout.strip().split(";")[0]
+    info = cluster.wait_for_state(job, ("COMPLETED", "FAILED", "CANCELLED", "TIMEOUT"), 400)
+    log = tmp_path / f"slurm-{job}.out"
+    assert info["JobState"] == "COMPLETED", log.read_text()[-4000:]
+    return log.read_text(), weights
+
+
+def check_ranks(text: str, weights: Path, results: Path) -> None:
+    assert "srun --kill-on-bad-exit=0" in text
+    rank0, rank1 = hashes(Path(f"{weights}.rank0")), hashes(Path(f"{weights}.rank1"))
+    # every update of 2 x (> 128) experiences, up to 2000 steps: at least 5 of them
+    assert len(rank0) >= 5
+    assert rank0 == rank1  # brain, update number, step, sha256 of the weights: bit for bit
+    assert len({h[3] for h in rank0}) == len(rank0)  # the weights changed at every update
+    per_rank = [int(n) for n in re.findall(r"experiences per rank since start: rank 0: (\d+), rank 1: (\d+)",
+                                           text)[-1]]
+    assert min(per_rank) >= 0.3 * MAX_STEPS  # both ranks contributed, about evenly
+    assert sum(per_rank) >= MAX_STEPS
+    acc = EventAccumulator(str(results / "ranks" / "Basic"), size_guidance={"scalars": 0})
+    acc.Reload()
+    last = {tag: acc.Scalars(tag)[-1].value for tag in ("Ranks/Steps of rank 0", "Ranks/Steps of rank 1")}
+    assert last["Ranks/Steps of rank 1"] >= 0.3 * MAX_STEPS and last["Ranks/Steps of rank 0"] >= 0.3 * MAX_STEPS
+    assert (results / "ranks" / "Basic.onnx").is_file()
+    # both ranks' simulators wrote their logs beside the run: workers 0 and 1 (rank 1's first)
+    assert {p.name for p in (results / "ranks" / "run_logs").glob("Player-*.log")} == {"Player-0.log",
+                                                                                       "Player-1.log"}
+
+
+def test_two_ranks_under_srun_train_one_policy(cluster, tmp_path):
+    text, weights = run_two_ranks(cluster, tmp_path, "--ntasks=2")
+    check_ranks(text, weights, tmp_path / "results")
+
+
+def test_two_ranks_on_two_nodes_average_over_the_network(cluster2, tmp_path):
+    text, weights = run_two_ranks(cluster2, tmp_path, "--nodes=2", "--ntasks-per-node=1")
+    check_ranks(text, weights, tmp_path / "results")
+    # rank 0 listened on its node's own address (Slurm's NodeAddr), gloo on the namespace's eth0
+    node_addr = cluster2.nodes[0][1]
+    assert re.search(rf"Rank 0 of 2 \(srun, gloo over eth0\): waiting for the other ranks at tcp://{node_addr}:9\d\d\d",
+                     text), text[-3000:]
