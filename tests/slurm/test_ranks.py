@@ -5,6 +5,7 @@ On two nodes (network namespaces) the gradients cross a veth pair and a bridge."
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 
 import pytest
@@ -83,3 +84,38 @@ def test_two_ranks_on_two_nodes_average_over_the_network(cluster2, tmp_path):
     node_addr = cluster2.nodes[0][1]
     assert re.search(rf"Rank 0 of 2 \(srun, gloo over eth0\): waiting for the other ranks at tcp://{node_addr}:9\d\d\d",
                      text), text[-3000:]
+
+
+def test_two_ranks_survive_the_warning_signal_and_resume(cluster, tmp_path):
+    """USR1 to the batch shell reaches both ranks through srun; rank 0 saves, the job is
+    requeued, resumes at the saved step (rank 1 gets rank 0's restored weights) and completes."""
+    cfg = tmp_path / "basic.yaml"
+    cfg.write_text(CONFIG.replace(f"max_steps: {MAX_STEPS}", "max_steps: 3000"))
+    weights = tmp_path / "weights"
+    env = {**cluster.env, "MLAGENTS_LIKE_DEBUG_WEIGHTS": str(weights)}
+    job = cluster.run("sbatch", "--parsable", "--mem=1G", "--cpus-per-task=1", "--ntasks=2",
+                      f"--output={tmp_path}/slurm-%j.out", TEMPLATE, str(cfg), "--env", "stub:basic",
+                      "--seed", "1", "--results-dir", str(tmp_path / "results"),
+                      env=env, cwd=ROOT).stdout.strip().split(";")[0]
+    log = tmp_path / f"slurm-{job}.out"
+    wait_for_line(log, r"Basic\. Step: 1000\.")
+    cluster.run("scancel", "--batch", "--signal=USR1", job)
+    info = cluster.wait_for_state(job, ("COMPLETED", "FAILED", "CANCELLED", "TIMEOUT"), 400)
+    text = log.read_text()
+    assert info["JobState"] == "COMPLETED" and int(info["Restarts"]) == 1, (info, text[-4000:])
+    first, second = text.split("(restart 1)")
+    assert "exit 75); requeueing" in first, first[-3000:]
+    saved = int(re.findall(r"Basic-(\d+)\.onnx to ", first)[-1])
+    resumed = int(re.search(r"Loaded \S+checkpoint\.pt for behavior Basic at step (\d+)", second).group(1))
+    assert 1000 <= saved == resumed < 3000
+    rank0, rank1 = hashes(Path(f"{weights}.rank0")), hashes(Path(f"{weights}.rank1"))
+    assert rank0 == rank1 and len(rank0) >= 8  # both starts' updates, bit-identical
+    assert "trainer exited with status 0" in second
+
+
+def wait_for_line(log: Path, pattern: str, timeout: float = 240) -> None:
+    deadline = time.monotonic() + timeout
+    while not (log.exists() and re.search(pattern, log.read_text(errors="replace"))):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"no {pattern!r} in {log}")
+        time.sleep(0.2)
