@@ -5,8 +5,8 @@ allocation) or ``torchrun --nproc-per-node K -m trainer.cli ...``; docs/cluster.
 design and its costs. This module owns everything about ranks: who we are (from the launcher's
 variables, read by trainer/config/env_vars.py), the torch.distributed process group (gloo on the
 CPU, NCCL for --torch-device cuda) and every collective. The run loop (trainer/run.py) calls it at
-five points: ``start``, ``adopt`` (a new brain), ``agree`` (once per exchange with the
-simulators), ``gather_stats`` (at a summary) and ``after_update``. Alone (world size 1) each of
+five points: ``start``, ``adopt`` (a new brain), ``agree`` (after each exchange with the
+simulators; collective every MLAGENTS_LIKE_DIST_SYNC_EVERY-th), ``gather_stats`` (at a summary) and ``after_update``. Alone (world size 1) each of
 them is a no-op or the single-process rule, and torch.distributed is never imported.
 
 What stays identical on every rank, and how:
@@ -126,10 +126,11 @@ def interface_towards(addr: str) -> str | None:
 class _Brain:
     """One brain's bookkeeping shared by the ranks."""
 
-    synced_step: int  # the step every rank agreed on last
+    synced_step: int  # the step every rank agreed on last: the trainer's step between agreements
     seeds: tuple[int, int]  # this rank's sampling and shuffling seeds
     steps_by_rank: np.ndarray  # experiences each rank contributed since this process started
     joined: bool = False  # rank 0's weights were broadcast
+    unsynced: int = 0  # this rank's experiences since the last agreement
     updates: int = 0
 
 
@@ -142,6 +143,8 @@ class Ranks:
     backend: str | None = None
     device: str = "cpu"
     debug_weights: str | None = None
+    sync_every: int = 1  # exchanges per agreement (MLAGENTS_LIKE_DIST_SYNC_EVERY)
+    exchanges: int = 0
     broken: bool = False  # a collective failed: from now on everything is local
     brains: dict[str, _Brain] = field(default_factory=dict)
 
@@ -186,7 +189,7 @@ class Ranks:
         STOP.deferred = True  # stop signals are acted on in ``agree``, by every rank at once
         ranks = cls(rank=r.rank, world=r.world_size, backend=backend,
                     device=f"cuda:{r.local_rank}" if backend == "nccl" else "cpu",
-                    debug_weights=env_vars.debug_weights)
+                    debug_weights=env_vars.debug_weights, sync_every=env_vars.dist_sync_every)
         if backend == "nccl":
             import torch
 
@@ -235,10 +238,21 @@ class Ranks:
     # ------------------------------------------------------------------ once per exchange
     def agree(self, runners: dict) -> dict[str, int | None]:
         """The brains to update now, each with the buffer length all ranks use (None alone: the
-        whole buffer). With other ranks, first: a stop on any rank raises GracefulStop on all;
-        step counts and normalisers are merged; a brain every rank knows is joined."""
+        whole buffer). With other ranks, at every ``sync_every``-th exchange (the same ones on
+        every rank: they step their simulators in lockstep, one call per exchange): a stop on any
+        rank raises GracefulStop on all; step counts and normalisers are merged; a brain every
+        rank knows is joined. Between agreements a trainer's step stays the agreed one (this
+        rank's new experiences wait in ``unsynced``), so everything decided from the step
+        (max_steps, summaries, checkpoints) happens at the same exchange on every rank."""
         if not self.active:
             return {b: None for b, r in runners.items() if not r.done and r.trainer.ready_to_update()}
+        for name, runner in runners.items():
+            brain = self.brains[name]
+            brain.unsynced += runner.trainer.step - brain.synced_step
+            runner.trainer.step = brain.synced_step
+        self.exchanges += 1
+        if (self.exchanges - 1) % self.sync_every:  # the 1st exchange, then every sync_every-th
+            return {}
         names = sorted(runners)
         header = np.array([float(STOP.requested is not None), float(zlib.crc32("\n".join(names).encode())),
                            float(len(names))])
@@ -254,7 +268,8 @@ class Ranks:
         parts = []
         for name in names:
             trainer, brain = runners[name].trainer, self.brains[name]
-            parts.append(np.array([trainer.step - brain.synced_step, len(trainer.buffer)], dtype=np.float64))
+            parts.append(np.array([brain.unsynced, len(trainer.buffer)], dtype=np.float64))
+            brain.unsynced = 0
             parts += [n.take_pending().numpy() for n in trainer.normalizers()]
         rows = self._all_gather(np.concatenate(parts))
         updates: dict[str, int | None] = {}
@@ -295,6 +310,7 @@ class Ranks:
             return
         trainer.load_state_dict(sent["state"])
         trainer.step = brain.synced_step = sent["step"]
+        brain.unsynced = 0
         runner.next_summary, runner.next_checkpoint = sent["next_summary"], sent["next_checkpoint"]
         trainer.buffer.clear()
         for normalizer in trainer.normalizers():

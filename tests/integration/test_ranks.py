@@ -83,7 +83,8 @@ def test_torchrun_two_ranks_train_one_policy_bit_identically(tmp_path, env_no_pr
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", "2",
            "-m", "trainer.cli", *_args(tmp_path, 1500)]
     r = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300,
-                       env=_env(env_no_proxy, MLAGENTS_LIKE_DEBUG_WEIGHTS=str(weights)))
+                       env=_env(env_no_proxy, MLAGENTS_LIKE_DEBUG_WEIGHTS=str(weights),
+                                MLAGENTS_LIKE_DIST_SYNC_EVERY="1"))  # the others: the default 8
     text = r.stdout + r.stderr
     assert r.returncode == 0, text[-4000:]
     rank0 = Path(f"{weights}.rank0").read_text().splitlines()

@@ -35,6 +35,8 @@ def test_srun_tasks_are_ranks_and_a_batch_script_alone_is_one():
     # sbatch --ntasks=2 runs the script once, without a step: not two ranks
     assert RankEnv.from_environ({"SLURM_PROCID": "0", "SLURM_NTASKS": "2", "SLURM_JOB_ID": "1"}) == RankEnv()
     assert EnvVars.from_environ({"RANK": "0", "WORLD_SIZE": "2"}).ranks.world_size == 2
+    tuned = EnvVars.from_environ({"MLAGENTS_LIKE_DIST_SYNC_EVERY": "3", "MLAGENTS_LIKE_DIST_TIMEOUT_S": "60"})
+    assert (tuned.dist_sync_every, tuned.dist_timeout_s, EnvVars().dist_sync_every) == (3, 60.0, 8)
 
 
 @pytest.mark.parametrize("environ, named", [
@@ -43,6 +45,7 @@ def test_srun_tasks_are_ranks_and_a_batch_script_alone_is_one():
     ({"SLURM_PROCID": "0", "SLURM_STEP_NUM_TASKS": "-1"}, "SLURM_STEP_NUM_TASKS='-1'"),
     ({"RANK": "0", "WORLD_SIZE": "2", "MASTER_PORT": "70000"}, "MASTER_PORT='70000'"),
     ({"MLAGENTS_LIKE_DIST_TIMEOUT_S": "0"}, "MLAGENTS_LIKE_DIST_TIMEOUT_S='0'"),
+    ({"MLAGENTS_LIKE_DIST_SYNC_EVERY": "0"}, "MLAGENTS_LIKE_DIST_SYNC_EVERY='0'"),
 ])
 def test_bad_values_are_named(environ, named):
     with pytest.raises(ConfigError, match=named.replace("(", r"\(")):

@@ -28,6 +28,8 @@ MLAGENTS_LIKE_NUMPY_UPDATE     ``numpy_update``   1: PPO's minibatch steps in nu
                                                  allows it; 0 keeps torch autograd (trainer/ppo)
 MLAGENTS_LIKE_DIST_TIMEOUT_S   ``dist_timeout_s`` 300: seconds a rank waits for the others in a
                                                  collective before it gives up (trainer/distributed.py)
+MLAGENTS_LIKE_DIST_SYNC_EVERY  ``dist_sync_      8: data-parallel ranks agree (stop, steps, normalisers,
+                               every``           updates) every this many exchanges (docs/cluster.md)
 MLAGENTS_LIKE_DEBUG_WEIGHTS    ``debug_weights``  None: a path; each rank r of a data-parallel run
                                                  appends a hash of its weights after every update
                                                  to PATH.rank<r> (the tests compare them)
@@ -57,12 +59,15 @@ TRANSPORT = PREFIX + "TRANSPORT"
 NUMPY_UPDATE = PREFIX + "NUMPY_UPDATE"
 DIST_TIMEOUT_S = PREFIX + "DIST_TIMEOUT_S"
 DEBUG_WEIGHTS = PREFIX + "DEBUG_WEIGHTS"
-KNOWN = (TORCH_THREADS, BLAS_THREADS, SPIN_WAIT_MS, TRANSPORT, NUMPY_UPDATE, DIST_TIMEOUT_S, DEBUG_WEIGHTS)
+DIST_SYNC_EVERY = PREFIX + "DIST_SYNC_EVERY"
+KNOWN = (TORCH_THREADS, BLAS_THREADS, SPIN_WAIT_MS, TRANSPORT, NUMPY_UPDATE, DIST_TIMEOUT_S, DIST_SYNC_EVERY,
+         DEBUG_WEIGHTS)
 JOB_TEMPLATE_ONLY = (PREFIX + "IMAGE", PREFIX + "VENV")  # read by docker/slurm/train.sbatch only
 
 TRANSPORTS = ("http2", "grpcio")  # the gRPC transports of trainer/protocol/server.py
 DEFAULT_SPIN_WAIT_S = 1.0e-3
 DEFAULT_DIST_TIMEOUT_S = 300.0
+DEFAULT_DIST_SYNC_EVERY = 8
 
 
 @dataclass(frozen=True)
@@ -121,6 +126,7 @@ class EnvVars:
     transport: str = "http2"
     numpy_update: bool = True
     dist_timeout_s: float = DEFAULT_DIST_TIMEOUT_S
+    dist_sync_every: int = DEFAULT_DIST_SYNC_EVERY
     debug_weights: str | None = None
     ranks: RankEnv = RankEnv()
 
@@ -142,6 +148,8 @@ class EnvVars:
             transport=_transport(values[TRANSPORT]),
             numpy_update=_numpy_update(values[NUMPY_UPDATE]),
             dist_timeout_s=_seconds(DIST_TIMEOUT_S, values[DIST_TIMEOUT_S], DEFAULT_DIST_TIMEOUT_S),
+            dist_sync_every=_threads(DIST_SYNC_EVERY, values[DIST_SYNC_EVERY], "exchanges per agreement of the "
+                                     "data-parallel ranks") if values[DIST_SYNC_EVERY] else DEFAULT_DIST_SYNC_EVERY,
             debug_weights=values[DEBUG_WEIGHTS] or None,
             ranks=RankEnv.from_environ(environ),
         )
