@@ -12,7 +12,8 @@ allreduce  two gloo processes on 127.0.0.1 (the cost on one node; between nodes 
            and the per-exchange agreement of trainer/distributed.py (two all-gathers of a few
            floats). Min over --repeats of the mean over --calls.
 train      the same task and step budget as 1 rank x 1 simulator, 2 ranks x 1 simulator (RANK /
-           WORLD_SIZE, two processes) and 1 rank x 2 simulators (--num-envs 2): wall seconds,
+           WORLD_SIZE, two processes), 1 rank x 2 simulators (--num-envs 2), and 2 ranks with
+           buffer_size and batch_size halved (per rank: the updates of one process): wall seconds,
            agent steps/s in all and per rank, steady steps/s from the summaries' own times, and
            the mean reward at every summary step (rank 0's TensorBoard).
 srun       the same 1-rank training run directly and as `srun -n 1` in a private one-node Slurm
@@ -46,7 +47,7 @@ def env_for_children(**extra: str) -> dict[str, str]:
 
 
 # --------------------------------------------------------------------------------- allreduce
-def parameter_counts() -> list[dict]:
+def parameter_counts(measure: bool = False) -> list[dict]:
     """(name, parameters of actor + critic, minibatch steps per update) of the real networks."""
     from protos.types import BehaviorSpec
     from trainer.ppo.hyperparams import PPOHyperparams
@@ -67,8 +68,41 @@ def parameter_counts() -> list[dict]:
         trainer = PPOTrainer(name, BehaviorSpec(cls.observation_specs, cls.action_spec), hp, seed=0)
         rows.append({"network": name, "parameters": int(trainer.optimizer.exp_avg.size),
                      "steps_per_update": h["num_epoch"] * (h["buffer_size"] // h["batch_size"]),
-                     "normalizer_floats": sum(1 + 2 * m.running_mean.numel() for m in trainer.normalizers())})
+                     "normalizer_floats": sum(1 + 2 * m.running_mean.numel() for m in trainer.normalizers()),
+                     "compute_per_step_ms": update_compute_ms(name, cls, hp) if measure else None})
     return rows
+
+
+def update_compute_ms(name: str, cls, hp, repeats: int = 3) -> float:
+    """One minibatch step's compute (gradients + Adam, actor and critic, as ranks run it: no
+    child process), from updates of 20 minibatches on random experiences (the cost per step
+    does not depend on the buffer's length): min over ``repeats``."""
+    import dataclasses
+
+    import numpy as np
+
+    from protos.types import BehaviorSpec
+    from trainer.ppo import numpy_update
+    from trainer.ppo.buffer import Trajectory
+    from trainer.ppo.trainer import PPOTrainer
+
+    hp = dataclasses.replace(hp, buffer_size=20 * hp.batch_size, num_epoch=1)
+    trainer = PPOTrainer(name, BehaviorSpec(cls.observation_specs, cls.action_spec), hp, seed=0)
+
+    numpy_update.FORK_MIN_WORK = float("inf")
+    rng = np.random.default_rng(0)
+    best = float("inf")
+    for _ in range(repeats):
+        while not trainer.ready_to_update():
+            obs = [rng.standard_normal((64, *o.shape)).astype(np.float32) for o in cls.observation_specs]
+            out = trainer.policy.act(obs, None)
+            trainer.process_trajectory(Trajectory(obs, [o[-1] for o in obs], rng.standard_normal(64).astype(np.float32),
+                                                  out.continuous_raw, out.discrete, out.log_probs, None, False, True))
+        steps = trainer.optimizer.step_count
+        start = time.perf_counter()
+        trainer.update()
+        best = min(best, (time.perf_counter() - start) / (trainer.optimizer.step_count - steps))
+    return best * 1e3
 
 
 def _allreduce_worker(rank: int, port: int, rows: list[dict], repeats: int, calls: int, out: str) -> None:
@@ -118,29 +152,34 @@ def bench_allreduce(args) -> dict:
 
     from tests.integration.conftest import free_port_block
 
-    rows = parameter_counts()
+    rows = parameter_counts(measure=True)
     out = tempfile.mktemp(suffix=".json")
     mp.spawn(_allreduce_worker, args=(free_port_block(1), rows, args.repeats, args.calls, out), nprocs=2)
     results = json.loads(Path(out).read_text())
     os.unlink(out)
-    lines = ["| network | parameters | all-reduce per step: mean (fastest) | steps per update | "
-             "all-reduce per update: mean (fastest) | agreement per exchange: mean (fastest) |",
-             "|---|---:|---:|---:|---:|---:|"]
+    lines = ["| network | parameters | compute per minibatch step | all-reduce per step: mean (fastest) | "
+             "steps per update | all-reduce per update: mean (fastest) | agreement: mean (fastest) |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
     for r in results:
-        lines.append(f"| {r['network']} | {r['parameters']:,} | {r['allreduce_us']:.0f} ({r['allreduce_best_us']:.0f}) µs"
+        lines.append(f"| {r['network']} | {r['parameters']:,} | {r['compute_per_step_ms']:.2f} ms | "
+                     f"{r['allreduce_us']:.0f} ({r['allreduce_best_us']:.0f}) µs"
                      f" | {r['steps_per_update']} | {r['per_update_ms']:.1f} ({r['per_update_best_ms']:.1f}) ms | "
                      f"{r['agree_us']:.0f} ({r['agree_best_us']:.0f}) µs |")
     return {"results": results, "markdown": "\n".join(lines)}
 
 
 # --------------------------------------------------------------------------------- training
-def write_config(task: str, max_steps: int, folder: Path) -> Path:
+def write_config(task: str, max_steps: int, folder: Path, divide: int = 1) -> Path:
+    """The task's config with ``max_steps``, no checkpoint inside the run, and buffer_size and
+    batch_size divided by ``divide`` (K ranks with the updates of one process)."""
     config = yaml.safe_load((ROOT / "configs" / f"{task}.yaml").read_text())
     for settings in config["behaviors"].values():
+        for key in ("buffer_size", "batch_size"):
+            settings["hyperparameters"][key] //= divide
         settings["max_steps"] = max_steps
         settings["checkpoint_interval"] = 100 * max_steps
         settings["summary_freq"] = max(500, min(settings["summary_freq"], max_steps // 10))
-    path = folder / f"{task}.yaml"
+    path = folder / f"{task}{'' if divide == 1 else f'_div{divide}'}.yaml"
     path.write_text(yaml.safe_dump(config, sort_keys=False))
     return path
 
@@ -191,14 +230,18 @@ def run_setup(label: str, task: str, config: Path, folder: Path, seed: int, rank
 def bench_train(args) -> dict:
     folder = Path(tempfile.mkdtemp(prefix="bench-ranks-"))
     config = write_config(args.task, args.max_steps, folder)
+    halved = write_config(args.task, args.max_steps, folder, divide=2)
     runs = [run_setup(f"{r}rank_x{e}env", args.task, config, folder, args.seed, r, e)
             for r, e in ((1, 1), (2, 1), (1, 2))]
+    runs.append(run_setup("2rank_x1env_halved", args.task, halved, folder, args.seed, 2, 1))
     lines = ["| setup | wall s | agent steps/s | per rank | steady steps/s | reward at the last common summary |",
              "|---|---:|---:|---:|---:|---:|"]
     common = min(r["final_step"] for r in runs)
     for r in runs:
         at = [x["value"] for x in r["rewards"] if x["step"] <= common]
-        lines.append(f"| {r['ranks']} rank x {r['envs_per_rank']} sim | {r['wall_s']:.1f} | {r['steps_per_s']:.0f} | "
+        note = ", buffer/batch ÷ 2" if r["setup"].endswith("halved") else ""
+        lines.append(f"| {r['ranks']} rank x {r['envs_per_rank']} sim{note} | {r['wall_s']:.1f} | "
+                     f"{r['steps_per_s']:.0f} | "
                      f"{r['per_rank_steps_per_s']:.0f} | {r['steady_steps_per_s'] or 0:.0f} | "
                      f"{at[-1] if at else float('nan'):.3f} |")
     two_ranks, two_envs = runs[1], runs[2]

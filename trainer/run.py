@@ -268,8 +268,7 @@ class RunState:
             checkpointed = checkpointed or runner.last_checkpoint_step != before
             for key, value in stats.items():
                 self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
-        with self.timers.scope("ranks.agree"):
-            updates = self.ranks.agree(self.runners)  # {brain: rows} to update now; alone: who is ready
+        updates = self.ranks.agree(self.runners)  # {brain: rows} to update now; alone: who is ready
         for brain, runner in sorted(self.runners.items()):  # one order on every rank
             if brain in updates:
                 with self.timers.scope("update"):

@@ -124,7 +124,7 @@ def test_merged_stats_equal_stats_of_all_values():
 def test_adam_hands_its_flat_gradient_buffer_to_reduce_before_the_step():
     """A reduce that turns the gradients [1, -2] into [3, 1] (as an average over ranks would):
     the step is the plain step with [3, 1], and differs from the one with [1, -2]."""
-    reduced, plain = Adam([torch.nn.Parameter(torch.zeros(2))], lr=0.1), Adam([torch.nn.Parameter(torch.zeros(2))], lr=0.1)
+    reduced, plain = (Adam([torch.nn.Parameter(torch.zeros(2))], lr=0.1) for _ in range(2))
     seen = []
     reduced.reduce = lambda flat: (seen.append(flat.copy()), flat.__setitem__(slice(None), [3.0, 1.0]))
     reduced.params[0].grad = torch.tensor([1.0, -2.0])

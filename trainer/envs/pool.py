@@ -203,7 +203,8 @@ class EnvPool:
         their last message, the restarted ones for their first RESET. Repeats if one dies again."""
         while failed:
             for w, err in failed:
-                if w.process is None or not self._restarts[w.worker_id - self.settings.first_worker].allow_restart(time.monotonic()):
+                quota = self._restarts[w.worker_id - self.settings.first_worker]
+                if w.process is None or not quota.allow_restart(time.monotonic()):
                     raise err
                 logger.warning("Worker %d failed (%s); restarting it and resetting all environments.",
                                w.worker_id, err)
