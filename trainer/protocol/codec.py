@@ -63,6 +63,7 @@ SUPPORTED_DIMENSION_PROPERTIES = frozenset(
         (_P.VARIABLE_SIZE, _P.NONE),
     }
 )
+_DIMENSION_PROPERTY_VALUES = frozenset(int(p) for p in _P)
 _VERSION_RE = re.compile(r"(\d+)\.(\d+)(?:\.(\d+))?(?:[ab]\d+)?")  # StrictVersion's grammar
 
 
@@ -123,12 +124,13 @@ def behavior_spec_from_proto(brain_params, agent_info) -> BehaviorSpec:
     observation_specs = []
     for index, obs in enumerate(agent_info.observations):
         shape = tuple(obs.shape)
-        props = tuple(_P(p) for p in obs.dimension_properties) or (_P.UNSPECIFIED,) * len(shape)
+        known = all(p in _DIMENSION_PROPERTY_VALUES for p in obs.dimension_properties)
+        props = tuple(_P(p) if known else p for p in obs.dimension_properties) or (_P.UNSPECIFIED,) * len(shape)
         if len(props) != len(shape) or props not in SUPPORTED_DIMENSION_PROPERTIES:
             raise ProtocolError(
                 f"Unsupported sensor {obs.name!r} (observation {index}) of behavior "
                 f"{brain_params.brain_name!r}: shape {shape} with dimension properties "
-                f"{[p.name for p in props]}. Supported are vectors (rank 1), CHW images (rank 3) and "
+                f"{[getattr(p, 'name', p) for p in props]}. Supported are vectors (rank 1), CHW images (rank 3) and "
                 "variable-length entity lists (VARIABLE_SIZE, NONE); change the sensor in the scene."
             )
         if any(d <= 0 for d in shape) or math.prod(shape) > MAX_OBSERVATION_FLOATS:
