@@ -1,0 +1,133 @@
+"""kill -9 of the trainer at 22 moments across acting, updating and checkpoint writing; every
+``--resume`` loads the newest complete checkpoint, cleans what the killed run left, and the last
+run finishes (docs/reliability.md). The moments are picked deterministically with the
+MLAGENTS_LIKE_CRASH_AT hook (trainer/crash_points.py): the trainer SIGKILLs itself at the Nth time
+it reaches a named point, so nothing of its own runs after (no handler, no flush)."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import textwrap
+
+import pytest
+
+from tests.integration.conftest import free_port_block, learn
+from trainer.artifacts.checkpoints import CheckpointError, checkpoint_step, load_checkpoint
+
+TINY = """
+behaviors:
+  Basic:
+    trainer_type: ppo
+    hyperparameters: {batch_size: 32, buffer_size: 128, learning_rate: 3.0e-4, beta: 5.0e-3,
+                      epsilon: 0.2, lambd: 0.95, num_epoch: 1}
+    network_settings: {normalize: false, hidden_units: 8, num_layers: 1}
+    reward_signals: {extrinsic: {gamma: 0.9, strength: 1.0}}
+    keep_checkpoints: 3
+    checkpoint_interval: 100
+    max_steps: 2400
+    time_horizon: 3
+    summary_freq: 400
+"""
+
+# (point, occurrence within that run); the first run starts fresh, each later one is --resume
+MOMENTS = [
+    ("checkpoint.status", 2),
+    ("act", 1), ("act", 57), ("act", 173),
+    ("update", 1), ("update", 2), ("update.done", 1), ("update.done", 3),
+    ("checkpoint.pt", 1), ("checkpoint.pt", 2), ("checkpoint.onnx", 1), ("checkpoint.onnx", 2),
+    ("checkpoint.latest", 1), ("checkpoint.latest", 2), ("checkpoint.status", 1),
+    ("atomic.replace", 1), ("atomic.replace", 2), ("atomic.replace", 3), ("atomic.replace", 5),
+    ("atomic.replace", 8), ("atomic.replace", 13),
+    ("act", 301),
+]
+STEP_FILE = re.compile(r"Basic-(\d+)\.(pt|onnx)")
+
+
+def newest_loadable_step(folder) -> int:
+    """What --resume must pick, found independently of the trainer: the highest step among the
+    folder's .pt files that load and pass their checksum."""
+    steps = []
+    for name in os.listdir(folder):
+        if name.endswith(".pt"):
+            try:
+                steps.append(checkpoint_step(load_checkpoint(folder / name)))
+            except CheckpointError:
+                pass
+    return max(steps)
+
+
+def test_kill_9_at_22_moments_and_resume_each_time(tmp_path, env_no_proxy):
+    assert len(MOMENTS) >= 20
+    config = tmp_path / "tiny.yaml"
+    config.write_text(textwrap.dedent(TINY))
+    run = tmp_path / "results" / "k"
+    base = [str(config), "--env", "stub:basic", "--run-id", "k", "--results-dir", str(tmp_path / "results"),
+            "--base-port", str(free_port_block()), "--seed", "3", "--timeout-wait", "20"]
+    resumed_steps, had_temp_files = [], 0
+    for i, (point, n) in enumerate(MOMENTS):
+        args = base + (["--resume"] if i else [])
+        expected = None
+        if i:
+            expected = newest_loadable_step(run / "Basic")
+            temp_files = [p for p in run.rglob(".*.tmp")]
+            had_temp_files += bool(temp_files)
+        r = learn(args, cwd=tmp_path, env={**env_no_proxy, "MLAGENTS_LIKE_CRASH_AT": f"{point}:{n}"}, timeout=120)
+        assert r.returncode == -signal.SIGKILL, (point, n, r.stdout[-2000:] + r.stderr[-2000:])
+        if i:
+            loaded = re.search(r"Loaded (\S+) for behavior Basic at step (\d+)\.", r.stdout)
+            if loaded is None:  # killed while writing configuration.yaml, before the simulator connected
+                assert (point, n) == ("atomic.replace", 1), (point, n, r.stdout[-2000:])
+            else:
+                assert int(loaded.group(2)) == expected, (point, n, r.stdout[-2000:])
+                resumed_steps.append(expected)
+            if temp_files:
+                assert "unfinished temp file(s)" in r.stdout, (point, n, temp_files)
+    assert had_temp_files >= 3  # the atomic.replace moments left temp files behind, and they went
+    assert resumed_steps == sorted(resumed_steps) and resumed_steps[-1] > resumed_steps[0]  # never went back
+    expected = newest_loadable_step(run / "Basic")
+    r = learn(base + ["--resume"], cwd=tmp_path, env=env_no_proxy, timeout=120)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert f"for behavior Basic at step {expected}." in r.stdout
+    # what is left: no temp file, no orphan half, keep_checkpoints pairs, all tracked in the status
+    assert not list(run.rglob("*.tmp"))
+    halves: dict[int, set] = {}
+    for name in os.listdir(run / "Basic"):
+        match = STEP_FILE.fullmatch(name)
+        if match:
+            halves.setdefault(int(match.group(1)), set()).add(match.group(2))
+    assert all(kinds == {"pt", "onnx"} for kinds in halves.values()), halves
+    status = json.loads((run / "run_logs" / "training_status.json").read_text())
+    tracked = [c["steps"] for c in status["Basic"]["checkpoints"]]
+    assert tracked == sorted(halves) and len(tracked) == 3
+    assert status["Basic"]["final_checkpoint"]["steps"] > 2400
+    for step in tracked:
+        assert checkpoint_step(load_checkpoint(run / "Basic" / f"Basic-{step}.pt")) == step
+
+
+def test_a_damaged_newest_checkpoint_falls_back_to_the_previous_one(tmp_path, env_no_proxy):
+    config = tmp_path / "tiny.yaml"
+    config.write_text(textwrap.dedent(TINY).replace("max_steps: 2400", "max_steps: 500"))
+    run = tmp_path / "results" / "d"
+    base = [str(config), "--env", "stub:basic", "--run-id", "d", "--results-dir", str(tmp_path / "results"),
+            "--base-port", str(free_port_block()), "--seed", "3"]
+    r = learn(base, cwd=tmp_path, env={**env_no_proxy, "MLAGENTS_LIKE_CRASH_AT": "checkpoint.status:4"})
+    assert r.returncode == -signal.SIGKILL
+    steps = sorted({int(m.group(1)) for m in map(STEP_FILE.fullmatch, os.listdir(run / "Basic")) if m})
+    newest, previous = steps[-1], steps[-2]
+    # the newest numbered file truncated, checkpoint.pt (the same step) with a flipped weight
+    pt = run / "Basic" / f"Basic-{newest}.pt"
+    pt.write_bytes(pt.read_bytes()[:-100])
+    import torch
+
+    latest = run / "Basic" / "checkpoint.pt"
+    state = torch.load(latest, weights_only=True)
+    next(iter(state["Policy"].values())).view(-1)[0] += 1.0
+    torch.save(state, latest)
+    r = learn(base + ["--resume"], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert f"checkpoint '{latest}' fails its checksum" in r.stdout
+    assert f"checkpoint '{pt}' is corrupt, truncated" in r.stdout
+    assert f"Loaded {run / 'Basic' / f'Basic-{previous}.pt'} for behavior Basic at step {previous}." in r.stdout
+    assert "Traceback" not in r.stdout + r.stderr
