@@ -131,3 +131,50 @@ def test_a_damaged_newest_checkpoint_falls_back_to_the_previous_one(tmp_path, en
     assert f"checkpoint '{pt}' is corrupt, truncated" in r.stdout
     assert f"Loaded {run / 'Basic' / f'Basic-{previous}.pt'} for behavior Basic at step {previous}." in r.stdout
     assert "Traceback" not in r.stdout + r.stderr
+
+
+def _simulator_pids(port: int) -> list[int]:
+    pids = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                argv = open(f"/proc/{entry}/cmdline", "rb").read().split(b"\0")
+            except OSError:
+                continue
+            if b"unity_stub_env.cli" in argv and b"--mlagents-port" in argv \
+                    and argv[argv.index(b"--mlagents-port") + 1] == str(port).encode():
+                pids.append(int(entry))
+    return pids
+
+
+def test_kill_9_of_a_simulator_mid_run_restarts_it_and_the_run_completes(tmp_path, env_no_proxy):
+    import subprocess
+    import sys
+
+    config = tmp_path / "tiny.yaml"
+    config.write_text(textwrap.dedent(TINY).replace("max_steps: 2400", "max_steps: 900"))
+    port = free_port_block(2)
+    cmd = [sys.executable, "-m", "trainer.cli", str(config), "--env", "stub:basic", "--num-envs", "2",
+           "--run-id", "s", "--results-dir", str(tmp_path / "results"), "--base-port", str(port),
+           "--seed", "3", "--timeout-wait", "20"]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env_no_proxy)
+    lines, killed = [], []
+    try:
+        for line in proc.stdout:
+            lines.append(line)
+            if "Exported" in line and not killed:  # mid-run: a checkpoint written, far from max_steps
+                killed = _simulator_pids(port + 1)
+                assert len(killed) == 1
+                os.kill(killed[0], signal.SIGKILL)
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    out = "".join(lines)
+    assert proc.returncode == 0, out[-3000:]
+    restarts = [line for line in out.splitlines() if "restarting it and resetting all environments" in line]
+    assert len(restarts) == 1 and "Worker 1" in restarts[0], out[-3000:]
+    assert _simulator_pids(port + 1) == []  # the replacement was stopped at the end too
+    status = json.loads((tmp_path / "results" / "s" / "run_logs" / "training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] > 900
