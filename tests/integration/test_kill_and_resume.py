@@ -178,3 +178,49 @@ def test_kill_9_of_a_simulator_mid_run_restarts_it_and_the_run_completes(tmp_pat
     assert _simulator_pids(port + 1) == []  # the replacement was stopped at the end too
     status = json.loads((tmp_path / "results" / "s" / "run_logs" / "training_status.json").read_text())
     assert status["Basic"]["final_checkpoint"]["steps"] > 900
+
+
+@pytest.mark.parametrize("point, n, sig", [
+    ("update", 2, "SIGTERM"), ("update", 2, "SIGUSR1"),         # lands at the start of an update
+    ("checkpoint.pt", 1, "SIGTERM"),                            # between two files of one checkpoint
+    ("atomic.replace", 3, "SIGUSR1"),                           # mid-write: the first checkpoint's .onnx
+    ("checkpoint.latest", 2, "SIGTERM"),
+])
+def test_a_stop_signal_during_an_update_or_a_checkpoint_write_ends_with_a_loadable_checkpoint(
+        tmp_path, env_no_proxy, point, n, sig):
+    config = tmp_path / "tiny.yaml"
+    config.write_text(textwrap.dedent(TINY))
+    run = tmp_path / "results" / "t"
+    r = learn([str(config), "--env", "stub:basic", "--run-id", "t", "--results-dir", str(tmp_path / "results"),
+               "--base-port", str(free_port_block()), "--seed", "3"], cwd=tmp_path,
+              env={**env_no_proxy, "MLAGENTS_LIKE_CRASH_AT": f"{point}:{n}:{sig}"})
+    assert r.returncode == 75, r.stdout[-3000:] + r.stderr[-3000:]
+    state = load_checkpoint(run / "Basic" / "checkpoint.pt")
+    step = checkpoint_step(state)
+    assert 0 < step < 2400
+    assert checkpoint_step(load_checkpoint(run / "Basic" / f"Basic-{step}.pt")) == step
+    assert (run / "Basic" / f"Basic-{step}.onnx").read_bytes() == (run / "Basic.onnx").read_bytes()
+    status = json.loads((run / "run_logs" / "training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] == step
+    assert not list(run.rglob("*.tmp"))
+
+
+def test_a_simulator_that_dies_before_its_handshake_is_started_again(tmp_path, env_no_proxy):
+    """Killed while it boots (the soak found it: a kill right after a --resume launched it)."""
+    import sys
+
+    game = tmp_path / "Boot.x86_64"
+    game.write_text(textwrap.dedent(f"""\
+        #!/bin/sh
+        if [ ! -f "{tmp_path}/died" ]; then touch "{tmp_path}/died"; kill -9 $$; fi
+        exec "{sys.executable}" -m unity_stub_env.cli --task basic "$@"
+        """))
+    game.chmod(0o755)
+    config = tmp_path / "tiny.yaml"
+    config.write_text(textwrap.dedent(TINY).replace("max_steps: 2400", "max_steps: 200"))
+    r = learn([str(config), "--env", str(tmp_path / "Boot"), "--run-id", "b", "--results-dir",
+               str(tmp_path / "results"), "--base-port", str(free_port_block()), "--timeout-wait", "20"],
+              cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert (tmp_path / "died").exists()
+    assert "Worker 0 failed before its first message" in r.stdout and "exited with code -9" in r.stdout

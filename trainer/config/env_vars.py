@@ -26,9 +26,9 @@ MLAGENTS_LIKE_TRANSPORT        ``transport``      http2: the gRPC transport of t
                                                  of the stubs it launches; or grpcio
 MLAGENTS_LIKE_NUMPY_UPDATE     ``numpy_update``   1: PPO's minibatch steps in numpy where the network
                                                  allows it; 0 keeps torch autograd (trainer/ppo)
-MLAGENTS_LIKE_CRASH_AT         ``crash_at``       unset: a test hook, ``POINT:N`` makes the trainer
-                                                 SIGKILL itself at the Nth time it reaches the named
-                                                 point (trainer/crash_points.py; docs/reliability.md)
+MLAGENTS_LIKE_CRASH_AT         ``crash_at``       unset: a test hook, ``POINT:N[:SIGNAL]`` makes the
+                                                 trainer SIGKILL itself (or send SIGNAL) the Nth time
+                                                 it reaches the named point (trainer/crash_points.py)
 =============================  ================  ====================================================
 """
 from __future__ import annotations
@@ -64,7 +64,7 @@ class EnvVars:
     spin_wait_s: float = DEFAULT_SPIN_WAIT_S
     transport: str = "http2"
     numpy_update: bool = True
-    crash_at: tuple[str, int] | None = None  # test hook: (point, occurrence), trainer/crash_points.py
+    crash_at: tuple | None = None  # test hook: (point, occurrence[, signal]), trainer/crash_points.py
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str] = os.environ) -> "EnvVars":
@@ -130,8 +130,12 @@ def _crash_at(value: str) -> tuple[str, int] | None:
         return None
     from trainer.crash_points import POINTS
 
-    point, _, count = value.rpartition(":")
-    if point in POINTS and re.fullmatch(r"[0-9]+", count) and int(count) >= 1:
-        return point, int(count)
-    raise ConfigError(f"{CRASH_AT}={value!r} is not POINT:N with N >= 1 and POINT one of {', '.join(POINTS)} "
-                      f"(a test hook that kills the trainer; unset it for a normal run).")
+    parts = value.split(":")
+    if len(parts) in (2, 3) and parts[0] in POINTS and re.fullmatch(r"[0-9]+", parts[1]) and int(parts[1]) >= 1:
+        if len(parts) == 2:
+            return parts[0], int(parts[1])
+        if parts[2] in ("SIGTERM", "SIGUSR1", "SIGINT", "SIGQUIT", "SIGKILL"):
+            return parts[0], int(parts[1]), parts[2]
+    raise ConfigError(f"{CRASH_AT}={value!r} is not POINT:N[:SIGNAL] with N >= 1, POINT one of "
+                      f"{', '.join(POINTS)} and SIGNAL a stop signal (a test hook that kills or stops the "
+                      f"trainer; unset it for a normal run).")
