@@ -202,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
         final_code = None
 
     text = "\n".join(log.read_text(errors="replace") for log in logs)
-    restarts = len(re.findall(r"restarting it and resetting all environments", text))
+    restarts = len(re.findall(r"restarting it and resetting all environments|failed before its first message", text))
     resumed_at = [int(s) for s in re.findall(r"for behavior Basic at step (\d+)\.", text)]
     labels = summary_labels(work / "results" / "soak" / "Basic")
     twice = sum(count - 1 for count in labels.values() if count > 1)

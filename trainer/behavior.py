@@ -261,7 +261,7 @@ class BehaviorRunner:
         if self.done:  # inference, or past max_steps while other behaviors still train
             return {}
         if self.trainer.step + len(traj) >= self.next_checkpoint:
-            self.save_checkpoint(status)
+            self.save_checkpoint(status, summary_follows=self.trainer.step + len(traj) >= self.next_summary)
             while self.next_checkpoint <= self.trainer.step + len(traj):
                 self.next_checkpoint += self.checkpoint_interval
         return self.trainer.process_trajectory(traj)
@@ -271,7 +271,7 @@ class BehaviorRunner:
         self.returns_since_checkpoint.extend(returns)
 
     # ----------------------------------------------------------------------------- files
-    def save_checkpoint(self, status: TrainingStatus, final: bool = False) -> str:
+    def save_checkpoint(self, status: TrainingStatus, final: bool = False, summary_follows: bool = True) -> str:
         """<brain>-<step>.pt, then its .onnx, then checkpoint.pt (each atomic); the caller writes
         training_status.json next. A kill between any two leaves the previous checkpoint.pt intact
         and files that ``tidy_after_resume`` recognises."""
@@ -280,9 +280,14 @@ class BehaviorRunner:
         state = self.trainer.state_dict()
         # The first summary a run resumed from this checkpoint writes. The final save comes after
         # the last summary (and a stop's early one): the next is the first not written. A periodic
-        # save comes just before the summary of its period, which this run goes on to write (a run
-        # killed without warning too, unless it dies within the few steps between): the one after.
-        next_summary = self.next_summary if final else self.next_summary + self.settings.summary_freq
+        # save whose trajectory also reaches the next summary comes just before that summary, which
+        # this run goes on to write in the same iteration (a run killed without warning too, unless
+        # it dies in between): the one after. Otherwise (checkpoint_interval not a multiple of
+        # summary_freq) the next summary is still far: a run killed before it must not skip it (the
+        # soak lost one label per kill that way, bench/RESULTS.md).
+        next_summary = self.next_summary
+        if not final and summary_follows:
+            next_summary += self.settings.summary_freq
         state["Summaries"] = {"next_step": torch.tensor(next_summary, dtype=torch.int64)}
         save_checkpoint(pt_path, state)
         crash_points.reached("checkpoint.pt")

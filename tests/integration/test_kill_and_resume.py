@@ -224,3 +224,36 @@ def test_a_simulator_that_dies_before_its_handshake_is_started_again(tmp_path, e
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert (tmp_path / "died").exists()
     assert "Worker 0 failed before its first message" in r.stdout and "exited with code -9" in r.stdout
+
+
+def shown_summary_steps(brain_dir) -> list[int]:
+    """Steps of 'Environment/Episode Length' TensorBoard shows: files in order, a SessionLog START
+    at step s drops what earlier files wrote at steps >= s (its purge of orphaned data)."""
+    from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
+    from tensorboard.compat.proto import event_pb2
+
+    shown: list[int] = []
+    for path in sorted(brain_dir.glob("events.out.tfevents.*"), key=lambda p: int(p.name.split(".")[3])):
+        for event in EventFileLoader(str(path)).Load():
+            if event.HasField("session_log") and event.session_log.status == event_pb2.SessionLog.START:
+                shown = [s for s in shown if s < event.step]
+            elif event.HasField("summary") and any(v.tag == "Environment/Episode Length" for v in event.summary.value):
+                shown.append(event.step)
+    return shown
+
+
+def test_a_kill_between_a_checkpoint_and_a_later_summary_loses_no_summary(tmp_path, env_no_proxy):
+    """checkpoint_interval 100 is not a multiple of summary_freq 250: the checkpoint at ~300 comes
+    long before the summary at 500. The resumed run must write 500 (it used to skip to 750)."""
+    config = tmp_path / "tiny.yaml"
+    config.write_text(textwrap.dedent(TINY).replace("max_steps: 2400", "max_steps: 1000")
+                      .replace("summary_freq: 400", "summary_freq: 250"))
+    run = tmp_path / "results" / "l"
+    base = [str(config), "--env", "stub:basic", "--run-id", "l", "--results-dir", str(tmp_path / "results"),
+            "--base-port", str(free_port_block()), "--seed", "3"]
+    r = learn(base, cwd=tmp_path, env={**env_no_proxy, "MLAGENTS_LIKE_CRASH_AT": "checkpoint.status:3"})
+    assert r.returncode == -signal.SIGKILL
+    assert shown_summary_steps(run / "Basic") == [250]
+    r = learn(base + ["--resume"], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert shown_summary_steps(run / "Basic") == [250, 500, 750, 1000]
