@@ -4,7 +4,7 @@
                    [--num-areas N] [--seed S] [--decision-period K] [--connect-timeout T]
                    [--spin-wait-ms MS] [--transport {http2,grpcio}]
     unity-stub-env --list
-    unity-stub-env --task dodge --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
+    unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
@@ -59,8 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--evaluate", action="append", metavar="POLICY", default=None,
                         help="run --task's scripted evaluation (no trainer) with POLICY: a trained .onnx, "
                              "'zero' or 'random' (the last two are always shown beside it); repeatable")
-    parser.add_argument("--episodes", type=int, default=500,
-                        help="--evaluate: random throws after the scripted ones (default 500)")
+    parser.add_argument("--episodes", type=int, default=None,
+                        help="--evaluate: dodge: random throws after the scripted ones (default 500); "
+                             "mimic: trials per motion and push (default 32)")
     parser.add_argument("--json", dest="json_path", default=None, metavar="FILE",
                         help="--evaluate: also write the results as JSON to FILE")
     parser.add_argument("--write-launcher", metavar="DIR", default=None,
