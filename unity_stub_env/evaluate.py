@@ -36,6 +36,10 @@ def _evaluations() -> dict:
     return {"dodge": (dodge.evaluate, format_table, 500), "mimic": (mimic.evaluate, mimic.format_table, 32)}
 
 
+# The options ``--evaluate-option KEY=VALUE`` may set, per task (float values).
+OPTIONS = {"mimic": ("residual",)}
+
+
 # Rows a task evaluates beside the baselines: label -> (policy, the task's evaluate options).
 # mimic: zero actions in residual mode, i.e. the PD controllers tracking the reference unaided.
 EXTRA_ROWS = {"mimic": {"reference PD": ("zero", {"residual": 1.0})}}
@@ -77,7 +81,23 @@ def load_policy(spec: str, observation_size: int, action_size: int, seed: int) -
     return act
 
 
-def run(task_name: str, policies: list[str], seed: int, episodes: int | None, json_path: str | None = None) -> int:
+def parse_options(task_name: str, pairs: list[str]) -> dict[str, float]:
+    """``["residual=0.25"]`` -> ``{"residual": 0.25}``; PolicyError names the task's known options."""
+    known, options = OPTIONS.get(task_name, ()), {}
+    for pair in pairs:
+        key, _, value = pair.partition("=")
+        if key not in known:
+            raise PolicyError(f"--evaluate-option {pair!r}: task {task_name} takes "
+                              f"{', '.join(k + '=NUMBER' for k in known) or 'no options'}")
+        try:
+            options[key] = float(value)
+        except ValueError:
+            raise PolicyError(f"--evaluate-option {pair!r}: {value!r} is not a number") from None
+    return options
+
+
+def run(task_name: str, policies: list[str], seed: int, episodes: int | None, json_path: str | None = None,
+        option_pairs: list[str] | None = None) -> int:
     """Evaluate every policy (baselines added), print a table; exit code 0, or 2 on bad input."""
     evaluations = _evaluations()
     if task_name not in evaluations:
@@ -96,16 +116,18 @@ def run(task_name: str, policies: list[str], seed: int, episodes: int | None, js
     action_size = task_class.action_spec.continuous_size
     names = list(dict.fromkeys([*policies, *BASELINES]))
     try:
+        options = parse_options(task_name, option_pairs or [])
         actors = {name: load_policy(name, observation_size, action_size, seed) for name in names}
-        results = {name: evaluate(actors[name], seed=seed, episodes=episodes) for name in names}
-        for label, (policy, options) in EXTRA_ROWS.get(task_name, {}).items():
-            results[label] = evaluate(actors[policy], seed=seed, episodes=episodes, **options)
+        results = {name: evaluate(actors[name], seed=seed, episodes=episodes, **options) for name in names}
+        for label, (policy, extra) in EXTRA_ROWS.get(task_name, {}).items():
+            results[label] = evaluate(actors[policy], seed=seed, episodes=episodes, **{**options, **extra})
     except PolicyError as error:
         print(f"unity-stub-env: {error}", file=sys.stderr)
         return 2
     print(format_results(results))
     if json_path:
-        Path(json_path).write_text(json.dumps({"task": task_name, "seed": seed, "results": results}, indent=1))
+        Path(json_path).write_text(json.dumps({"task": task_name, "seed": seed, "options": options,
+                                               "results": results}, indent=1))
     return 0
 
 

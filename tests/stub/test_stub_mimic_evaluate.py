@@ -54,3 +54,21 @@ def test_evaluate_prints_and_writes_every_motion_the_push_ladder_and_the_baselin
     for term in ("r_r", "r_v", "r_m", "r_e", "r_t"):
         assert 0.0 <= results["random"]["motions"]["walk"][term] <= 1.0
     assert np.isfinite(results["random"]["motions"]["walk"]["mean_reward"])
+
+
+def test_evaluate_options_reach_the_task_and_bad_ones_exit_2(tmp_path, capsys):
+    out_json = tmp_path / "eval.json"
+    # residual 1: the zero policy is the PD controllers on the reference, the same as the extra row
+    assert main(["--task", "mimic", "--evaluate", "zero", "--episodes", "8", "--evaluate-option", "residual=1",
+                 "--json", str(out_json)]) == 0
+    saved = json.loads(out_json.read_text())
+    assert saved["options"] == {"residual": 1.0}
+    assert saved["results"]["zero"] == saved["results"]["reference PD"]
+    assert saved["results"]["zero"]["motions"]["squat"]["balance_kept"] == 1.0
+    capsys.readouterr()
+    assert main(["--task", "mimic", "--evaluate", "zero", "--evaluate-option", "gain=3"]) == 2
+    assert "task mimic takes residual=NUMBER" in capsys.readouterr().err
+    assert main(["--task", "mimic", "--evaluate", "zero", "--evaluate-option", "residual=high"]) == 2
+    assert "'high' is not a number" in capsys.readouterr().err
+    assert main(["--task", "dodge", "--evaluate", "zero", "--evaluate-option", "residual=1"]) == 2
+    assert "task dodge takes no options" in capsys.readouterr().err
