@@ -33,6 +33,9 @@ MLAGENTS_LIKE_DIST_SYNC_EVERY  ``dist_sync_      8: data-parallel ranks agree (s
 MLAGENTS_LIKE_DEBUG_WEIGHTS    ``debug_weights``  None: a path; each rank r of a data-parallel run
                                                  appends a hash of its weights after every update
                                                  to PATH.rank<r> (the tests compare them)
+MLAGENTS_LIKE_CRASH_AT         ``crash_at``       unset: a test hook, ``POINT:N[:SIGNAL]`` makes the
+                                                 trainer SIGKILL itself (or send SIGNAL) the Nth time
+                                                 it reaches the named point (trainer/crash_points.py)
 =============================  ================  ====================================================
 
 Data-parallel ranks (docs/cluster.md) are found from variables of other families, read here too:
@@ -58,10 +61,11 @@ SPIN_WAIT_MS = PREFIX + "SPIN_WAIT_MS"
 TRANSPORT = PREFIX + "TRANSPORT"
 NUMPY_UPDATE = PREFIX + "NUMPY_UPDATE"
 DIST_TIMEOUT_S = PREFIX + "DIST_TIMEOUT_S"
-DEBUG_WEIGHTS = PREFIX + "DEBUG_WEIGHTS"
 DIST_SYNC_EVERY = PREFIX + "DIST_SYNC_EVERY"
+DEBUG_WEIGHTS = PREFIX + "DEBUG_WEIGHTS"
+CRASH_AT = PREFIX + "CRASH_AT"
 KNOWN = (TORCH_THREADS, BLAS_THREADS, SPIN_WAIT_MS, TRANSPORT, NUMPY_UPDATE, DIST_TIMEOUT_S, DIST_SYNC_EVERY,
-         DEBUG_WEIGHTS)
+         DEBUG_WEIGHTS, CRASH_AT)
 JOB_TEMPLATE_ONLY = (PREFIX + "IMAGE", PREFIX + "VENV")  # read by docker/slurm/train.sbatch only
 
 TRANSPORTS = ("http2", "grpcio")  # the gRPC transports of trainer/protocol/server.py
@@ -129,6 +133,7 @@ class EnvVars:
     dist_sync_every: int = DEFAULT_DIST_SYNC_EVERY
     debug_weights: str | None = None
     ranks: RankEnv = RankEnv()
+    crash_at: tuple | None = None  # test hook: (point, occurrence[, signal]), trainer/crash_points.py
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str] = os.environ) -> "EnvVars":
@@ -152,6 +157,7 @@ class EnvVars:
                                      "data-parallel ranks") if values[DIST_SYNC_EVERY] else DEFAULT_DIST_SYNC_EVERY,
             debug_weights=values[DEBUG_WEIGHTS] or None,
             ranks=RankEnv.from_environ(environ),
+            crash_at=_crash_at(values[CRASH_AT]),
         )
 
 
@@ -204,3 +210,19 @@ def _seconds(name: str, value: str, default: float) -> float:
         raise ConfigError(f"{name}={value!r} is not a number of seconds > 0; use e.g. {name}={default:g}, "
                           f"or unset it for the default.")
     return seconds
+
+
+def _crash_at(value: str) -> tuple[str, int] | None:
+    if not value:
+        return None
+    from trainer.crash_points import POINTS
+
+    parts = value.split(":")
+    if len(parts) in (2, 3) and parts[0] in POINTS and re.fullmatch(r"[0-9]+", parts[1]) and int(parts[1]) >= 1:
+        if len(parts) == 2:
+            return parts[0], int(parts[1])
+        if parts[2] in ("SIGTERM", "SIGUSR1", "SIGINT", "SIGQUIT", "SIGKILL"):
+            return parts[0], int(parts[1]), parts[2]
+    raise ConfigError(f"{CRASH_AT}={value!r} is not POINT:N[:SIGNAL] with N >= 1, POINT one of "
+                      f"{', '.join(POINTS)} and SIGNAL a stop signal (a test hook that kills or stops the "
+                      f"trainer; unset it for a normal run).")
