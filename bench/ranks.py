@@ -35,6 +35,10 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+# as the trainer runs (trainer/cli.py, trainer/run.py): one BLAS and one torch thread; set before
+# numpy loads (OpenBLAS's second thread busy-waits, which made the first numbers here 10-100x slower)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
 LEARN = [sys.executable, "-m", "trainer.cli"]
 REWARD_TAG = "Environment/Cumulative Reward"
 
@@ -89,6 +93,9 @@ def update_compute_ms(name: str, cls, hp, repeats: int = 3) -> float:
     hp = dataclasses.replace(hp, buffer_size=20 * hp.batch_size, num_epoch=1)
     trainer = PPOTrainer(name, BehaviorSpec(cls.observation_specs, cls.action_spec), hp, seed=0)
 
+    import torch
+
+    torch.set_num_threads(1)
     numpy_update.FORK_MIN_WORK = float("inf")
     rng = np.random.default_rng(0)
     best = float("inf")

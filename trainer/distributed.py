@@ -5,9 +5,10 @@ allocation) or ``torchrun --nproc-per-node K -m trainer.cli ...``; docs/cluster.
 design and its costs. This module owns everything about ranks: who we are (from the launcher's
 variables, read by trainer/config/env_vars.py), the torch.distributed process group (gloo on the
 CPU, NCCL for --torch-device cuda) and every collective. The run loop (trainer/run.py) calls it at
-five points: ``start``, ``adopt`` (a new brain), ``agree`` (after each exchange with the
-simulators; a collective every MLAGENTS_LIKE_DIST_SYNC_EVERY-th), ``gather_stats`` (at a
-summary) and ``after_update``. Alone (world size 1) each of them is a no-op or the single-process rule, and torch.distributed is never imported.
+a few points: ``start`` and ``close``, ``adopt`` (a new brain), ``agree`` (after each exchange
+with the simulators; a collective every MLAGENTS_LIKE_DIST_SYNC_EVERY-th), ``gather_stats`` (at
+a summary) and ``after_update``. Alone (world size 1) each of them is a no-op or the
+single-process rule, and torch.distributed is never imported.
 
 What stays identical on every rank, and how:
   * weights, optimiser moments, step: rank 0's brain is broadcast to the others when every rank
