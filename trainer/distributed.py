@@ -247,6 +247,8 @@ class Ranks:
         (max_steps, summaries, checkpoints) happens at the same exchange on every rank."""
         if not self.active:
             return {b: None for b, r in runners.items() if not r.done and r.trainer.ready_to_update()}
+        import torch
+
         for name, runner in runners.items():
             brain = self.brains[name]
             brain.unsynced += runner.trainer.step - brain.synced_step
@@ -286,11 +288,8 @@ class Ranks:
             at += 2
             for normalizer in trainer.normalizers():
                 size = normalizer.running_mean.shape[0]
-                total = rows[:, at:at + 1 + 2 * size].sum(axis=0)
-                import torch
-
-                normalizer.apply(int(total[0]), torch.from_numpy(total[1:1 + size]),
-                                 torch.from_numpy(total[1 + size:]))
+                total = torch.from_numpy(rows[:, at:at + 1 + 2 * size].sum(axis=0))
+                normalizer.apply(int(total[0]), total[1:1 + size], total[1 + size:])
                 at += 1 + 2 * size
             if not runner.done and shortest > trainer.hyperparams.buffer_size:
                 updates[name] = shortest
