@@ -83,7 +83,7 @@ class _Worker:
         describe = self.process.describe if self.process else "the Unity Editor"
         self.endpoint = UnityEndpoint(self.port, bind=s.bind, timeout_wait=s.timeout_wait,
                                       is_alive=is_alive, describe=describe, spin_wait=self.spin_wait,
-                                      transport=s.transport)
+                                      transport=s.transport, editor=self.process is None)
         self.endpoint.start()  # bind before launching, so the simulator finds us listening
         if self.process:
             self.process.start()
