@@ -197,7 +197,10 @@ class SACTrainer:
         actions, cont_log_probs, probs, all_log_probs = self.policy.sample_with_grad(obs, allowed, self.noise_generator)
         stored = t["continuous_actions"] if spec.continuous_size else None
         q1, q2 = self.q_network.q1_network, self.q_network.q2_network
-        q1_policy = q1(obs, actions)
+        # Q1 of the policy's own actions with Q1's parameters held constant: the policy loss's
+        # gradient reaches the policy only, so one backward pass serves all three losses
+        frozen = {name: p.detach() for name, p in q1.named_parameters()}
+        q1_policy = torch.func.functional_call(q1, frozen, (obs, actions))
         with torch.no_grad():
             q2_policy = q2(obs, actions)
             next_values = self.target_network(next_obs)
@@ -231,16 +234,14 @@ class SACTrainer:
             None if probs is None else probs.detach(), None if all_log_probs is None else all_log_probs.detach(),
             self.target_entropy[1], self.branches)
 
-        # the policy's gradients: it reads Q1, whose parameters' gradients are then dropped
-        self.policy_optimizer.zero_grad()
-        policy_loss.backward()
-        self.policy_optimizer.step()
-        self.value_optimizer.zero_grad()
-        (q1_loss + q2_loss + value_loss).backward()
-        self.value_optimizer.step()
-        self.entropy_optimizer.zero_grad()
-        entropy_loss.backward()
-        self.entropy_optimizer.step()
+        # each loss reaches only its own parameters (targets and alphas are constants in the
+        # others), so the sum's gradient is each optimiser's own
+        optimizers = (self.policy_optimizer, self.value_optimizer, self.entropy_optimizer)
+        for optimizer in optimizers:
+            optimizer.zero_grad()
+        (policy_loss + q1_loss + q2_loss + value_loss + entropy_loss).backward()
+        for optimizer in optimizers:
+            optimizer.step()
         losses.soft_update(self.critic, self.target_network, self.hyperparams.tau)
         stats = {
             "Losses/Policy Loss": policy_loss.item(),
