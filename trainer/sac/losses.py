@@ -25,10 +25,14 @@ def target_entropies(continuous_size: int, discrete_branches: Sequence[int]) -> 
 
 
 @torch.no_grad()
-def soft_update(source: nn.Module, target: nn.Module, tau: float) -> None:
-    """target = tau * source + (1 - tau) * target, parameter by parameter (tau 1 copies)."""
-    for src, dst in zip(source.parameters(), target.parameters()):
-        dst.mul_(1.0 - tau).add_(src, alpha=tau)
+def soft_update(source: nn.Module | Sequence[torch.Tensor], target: nn.Module | Sequence[torch.Tensor],
+                tau: float) -> None:
+    """target = tau * source + (1 - tau) * target, parameter by parameter (tau 1 copies).
+    Modules, or their parameter lists (the trainer keeps them: no module walk per step)."""
+    sources = source.parameters() if isinstance(source, nn.Module) else source
+    targets = target.parameters() if isinstance(target, nn.Module) else target
+    for src, dst in zip(sources, targets):
+        dst.lerp_(src, tau)
 
 
 def tanh_log_abs_det_jacobian(raw: torch.Tensor) -> torch.Tensor:

@@ -101,6 +101,10 @@ class SACTrainer:
                                             outputs_per_signal=q_outputs) for _ in range(2))).to(self.device)
             self.target_network = Critic(obs_specs, names, hyperparams).to(self.device)
         losses.soft_update(self.critic, self.target_network, 1.0)
+        # parameter lists walked every gradient step (nn.Module's own walk costs more than the ops)
+        self._q1_params = list(self.q_network.q1_network.parameters())
+        self._critic_params = list(self.critic.parameters())
+        self._target_params = list(self.target_network.parameters())
         self.log_ent_coef = EntropyCoefficients(hyperparams.init_entcoef, spec.continuous_size > 0,
                                                 len(self.branches)).to(self.device)
         self.target_entropy = losses.target_entropies(spec.continuous_size, self.branches)
@@ -199,8 +203,13 @@ class SACTrainer:
         q1, q2 = self.q_network.q1_network, self.q_network.q2_network
         # Q1 of the policy's own actions with Q1's parameters held constant: the policy loss's
         # gradient reaches the policy only, so one backward pass serves all three losses
-        frozen = {name: p.detach() for name, p in q1.named_parameters()}
-        q1_policy = torch.func.functional_call(q1, frozen, (obs, actions))
+        for p in self._q1_params:
+            p.requires_grad_(False)
+        try:
+            q1_policy = q1(obs, actions)
+        finally:
+            for p in self._q1_params:
+                p.requires_grad_(True)
         with torch.no_grad():
             q2_policy = q2(obs, actions)
             next_values = self.target_network(next_obs)
@@ -242,7 +251,7 @@ class SACTrainer:
         (policy_loss + q1_loss + q2_loss + value_loss + entropy_loss).backward()
         for optimizer in optimizers:
             optimizer.step()
-        losses.soft_update(self.critic, self.target_network, self.hyperparams.tau)
+        losses.soft_update(self._critic_params, self._target_params, self.hyperparams.tau)
         stats = {
             "Losses/Policy Loss": policy_loss.item(),
             "Losses/Value Loss": value_loss.item(),
