@@ -29,6 +29,7 @@ from trainer.config.settings import (
     RewardSignalSettings,
     RNDSettings,
     RunOptions,
+    SACSettings,
     SelfPlaySettings,
     TorchSettings,
     TrainerSettings,
@@ -41,7 +42,7 @@ __all__ = [
     "CuriositySettings", "EngineSettings", "EnvSettings",
     "EnvironmentParameterSettings", "GAILSettings", "GaussianSampler", "Lesson", "MemorySettings",
     "MultiRangeUniformSampler", "NetworkSettings", "PPOSettings", "RNDSettings", "RewardSignalSettings",
-    "RunOptions", "Sampler", "SelfPlaySettings", "TorchSettings", "TrainerSettings", "UniformSampler",
+    "RunOptions", "SACSettings", "Sampler", "SelfPlaySettings", "TorchSettings", "TrainerSettings", "UniformSampler",
     "assign_seeds", "build_parser", "load_run_options", "parse_run_options", "run_options_from_dict",
     "write_run_options",
 ]
