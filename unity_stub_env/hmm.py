@@ -261,6 +261,9 @@ class Hmm:
         try:
             with os.fdopen(handle, "w", encoding="utf-8") as out:
                 out.write(self.to_json())
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(temp, 0o666 & ~umask)  # mkstemp's 0600 is for the half-written file only
             os.replace(temp, path)
         except BaseException:
             if os.path.exists(temp):
