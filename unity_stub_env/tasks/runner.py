@@ -276,6 +276,7 @@ class RunnerTask(Task):
                 stats.append(("Runner/Track Completed", float(finished[agent]), StatsAggregationMethod.AVERAGE))
                 stats.append(("Runner/Platforms Passed", float(passed[i]), StatsAggregationMethod.AVERAGE))
                 stats.append(("Runner/Obstacles Hit", float(self.obstacles_hit[agent]), StatsAggregationMethod.AVERAGE))
+                stats.append(("Runner/Track Length", float(self.num_platforms[agent]), StatsAggregationMethod.AVERAGE))
         return TaskStep(rewards.astype(np.float32), done, interrupted, stats)
 
 
