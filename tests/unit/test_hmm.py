@@ -169,3 +169,41 @@ def test_cli_bad_inputs_exit_2_with_one_message(tmp_path):
         assert words in done.stderr and "Traceback" not in done.stderr
         assert len(done.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "m.json").exists()
+
+
+# ---------------------------------------------------------------------------- sampler_type: hmm
+def test_hmm_sampler_config_is_checked_at_load(tmp_path):
+    from trainer.config.env_params import environment_parameters_as_dict, structure_environment_parameters
+    from trainer.errors import ConfigError
+
+    def load(parameters):
+        return structure_environment_parameters({"track": {"sampler_type": "hmm", "sampler_parameters": parameters}})
+
+    for parameters, words in [({"length": 3}, "exactly one of 'model'"),
+                              ({"model": "m.json", "corpus": ["a b"]}, "exactly one of 'model'"),
+                              ({"model": str(tmp_path / "nope.json")}, "cannot read model"),
+                              ({"corpus": ["a a a"]}, "single label"),
+                              ({"corpus": ["a b"], "length": 0}, "length' must be >= 1"),
+                              ({"corpus": ["a b"], "count": 1000, "length": 1000}, "more than 100000"),
+                              ({"corpus": [1, 2]}, "list of sequences"),
+                              ({"corpus": ["a b"], "lenght": 3}, "lenght")]:
+        with pytest.raises(ConfigError, match=words):
+            load(parameters)
+    params = load({"corpus": "a b a\nb b a", "states": 2, "length": 4, "count": 2, "seed": 3})
+    written = environment_parameters_as_dict(params)["track"]["curriculum"][0]["value"]
+    assert written == {"sampler_type": "hmm", "sampler_parameters": {
+        "seed": 3, "model": "", "corpus": ["a b a", "b b a"], "states": 2, "length": 4, "count": 2}}
+    assert load(written["sampler_parameters"]) == params  # the written configuration reads back
+
+
+def test_sequences_encode_as_plain_float_parameters():
+    from protos import side_channels as sc
+
+    payloads = sc.encode_env_sequences("track", np.array([[0, 2], [1, 1]]), 3)
+    decoded = [sc.decode_env_parameter(p) for p in payloads]
+    assert [(key, param.kind, param.values) for key, param in decoded] == [
+        ("track.count", "float", (2.0,)), ("track.length", "float", (2.0,)), ("track.labels", "float", (3.0,)),
+        ("track.0", "float", (0.0,)), ("track.1", "float", (2.0,)), ("track.2", "float", (1.0,)),
+        ("track.3", "float", (1.0,))]
+    # string key (int32 length + bytes), int32 0 = float, float32 value, little-endian
+    assert payloads[3] == b"\x07\x00\x00\x00track.0" + b"\x00\x00\x00\x00" + b"\x00\x00\x00\x00"

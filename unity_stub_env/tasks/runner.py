@@ -36,7 +36,7 @@ Environment parameters, read at every episode start (docs/configuration.md §6.7
   ``zones`` (3), ``zone_length_min`` (4), ``zone_length_max`` (8), ``first_zone`` (-1 = random;
   0 urban, 1 rural, 2 desert). A curriculum lengthens tracks by raising the zone lengths.
   ``track.*``: a platform sequence sent by an ``hmm`` sampler named ``track`` (docs/configuration.md
-  §6.7, encoding in docs/protocol.md §4.3): when ``track.count`` >= 1, each episode takes one of
+  §6.7, encoding in docs/protocol.md §4.4): when ``track.count`` >= 1, each episode takes one of
   the ``track.count`` sequences (chosen by the task's RNG) as its platforms, label codes read as
   0 Left, 1 Right, 2 Straight (the sorted labels of a model over those three), after the start
   platform, with the props of zone ``first_zone``.
@@ -44,6 +44,7 @@ Environment parameters, read at every episode start (docs/configuration.md §6.7
 from __future__ import annotations
 
 import functools
+import logging
 import math
 import os
 from dataclasses import dataclass
@@ -54,6 +55,7 @@ from protos.types import ActionSpec, DimensionProperty, ObservationSpec, Observa
 from unity_stub_env.hmm import EPSILON_LABEL, Hmm
 from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
 
+logger = logging.getLogger("unity_stub_env")
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "runner_data")
 ZONES = ("urban", "rural", "desert")
 PLATFORM_LABELS = ("Left", "Right", "Straight")  # sorted: the codes an hmm sampler sends
@@ -173,6 +175,7 @@ class RunnerTask(Task):
         self.episode_step = np.zeros(n, dtype=np.int64)
         self.obstacles_hit = np.zeros(n, dtype=np.int64)
         self.track_seeds = np.zeros(n, dtype=np.int64)
+        self._warned_labels = False
         self.reset()
 
     # ------------------------------------------------------------------------------ tracks
@@ -185,6 +188,11 @@ class RunnerTask(Task):
         count = int(params.get("track.count", 0))
         length = int(params.get("track.length", 0))
         if count >= 1 and length >= 1:
+            labels = int(params.get("track.labels", len(PLATFORM_LABELS)))
+            if labels != len(PLATFORM_LABELS) and not self._warned_labels:
+                self._warned_labels = True
+                logger.warning("The 'track' sequences come from a model with %d labels; the runner reads codes "
+                               "0, 1, 2 as Left, Right, Straight and any other as Straight (docs/hmm.md).", labels)
             k = int(self.rng.integers(0, count))
             codes = [int(params.get(f"track.{k * length + t}", 2)) for t in range(length)]
             platforms = [PLATFORM_LABELS[c] if 0 <= c < len(PLATFORM_LABELS) else "Straight" for c in codes]
