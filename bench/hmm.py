@@ -122,7 +122,8 @@ def main() -> int:
         fast_ll = fast.pop("model").log_likelihood(encoded) / t_len
         full = t_len <= args.bw_full_max_t
         bw = time_baum_welch(encoded, N_TRUE, args.bw_iterations if full else args.bw_timed)
-        bw_ll = bw.pop("model").log_likelihood(encoded) / t_len if full else None
+        bw_model = bw.pop("model")
+        bw_ll = bw_model.log_likelihood(encoded) / t_len if full else None
         record["by_length"].append({"T": t_len, "fast": fast, "fast_ll": fast_ll, "bw": bw, "bw_ll": bw_ll,
                                     "true_ll": truth})
         print(f"| {t_len:.0e} | {fast['count_s']:.4f} | {fast['iterations']} | {fast['per_iteration_s']*1e6:.0f} µs | "
