@@ -188,7 +188,7 @@ def _check_hmm_sampler(sampler: HmmSampler, path: str) -> None:
     if sampler.count * sampler.length > MAX_HMM_VALUES:
         raise ConfigError(f"'{path}': count * length = {sampler.count * sampler.length} values is more than "
                           f"{MAX_HMM_VALUES} (each is one side-channel message); send fewer or shorter sequences.")
-    from unity_stub_env.hmm import HmmError
+    from unity_stub_env import HmmError
 
     try:
         hmm_model(sampler)
@@ -203,11 +203,11 @@ def hmm_model(sampler: HmmSampler):
 
 @functools.lru_cache(maxsize=16)
 def _hmm_model(model: str, corpus: tuple[str, ...], states: int):
-    from unity_stub_env.hmm import Hmm, parse_corpus, train
+    from unity_stub_env import Hmm, parse_corpus, train_hmm
 
     if model:
         return Hmm.load(model)
-    return train(parse_corpus("\n".join(corpus), "the sampler's corpus"), num_states=states, restarts=5, seed=0)
+    return train_hmm(parse_corpus("\n".join(corpus), "the sampler's corpus"), num_states=states, restarts=5, seed=0)
 
 
 @functools.lru_cache(maxsize=16)
