@@ -19,6 +19,8 @@ logger = logging.getLogger("mlagents_like")
 
 SCHEDULES = ("linear", "constant")
 ENCODER_TYPES = ("simple", "nature_cnn", "resnet", "match3", "fully_connected")
+# the smallest camera height and width each vis_encode_type takes (ML-Agents' limits)
+ENCODER_MIN_SIZE = {"simple": 20, "nature_cnn": 36, "resnet": 15, "match3": 5, "fully_connected": 1}
 CONDITIONING_TYPES = ("hyper", "none")
 TRAINER_TYPES = ("ppo", "sac", "poca")
 TRAINABLE_TRAINER_TYPES = ("ppo",)
@@ -218,6 +220,11 @@ class RunOptions:
     config_path: str | None = None
     #: --deterministic given on the CLI: also applies to behaviors that get plain defaults.
     cli_deterministic: bool = False
+    #: what to do instead of training (command line only, not in configuration.yaml; docs/mirror.md):
+    #: --check the YAML against --spec FILE, or --capture-spec FILE (record the behaviors and exit)
+    check: bool = False
+    spec_path: str | None = None
+    capture_spec: str | None = None
 
     def behavior_settings(self, brain_name: str) -> TrainerSettings:
         """The settings for ``brain_name`` (no ``?team=``), with init_path resolved for
