@@ -107,6 +107,9 @@ def _add_general_flags(parser: argparse.ArgumentParser) -> None:
     mirror.add_argument("--check", action=_StoreTrue,
                         help="check the trainer YAML against --spec FILE (or --env stub:mirror=FILE) and "
                              "exit: 0 if it fits, 2 with one line per problem")
+    mirror.add_argument("--max-steps", dest="max_steps_override", type=int, metavar="N", default=None,
+                        action=_Store, help="a short run: every behavior stops at N steps and writes a summary "
+                                            "at least every N/10 steps (for CI on the mirror)")
     mirror.add_argument("--spec", dest="spec_path", metavar="FILE", default=None, action=_Store,
                         help="a behaviors.json (from --capture-spec or a run's run_logs) for --check")
 
@@ -191,6 +194,7 @@ def parse_run_options(argv: Sequence[str]) -> RunOptions:
         logger.debug("run seed set to %d", env.seed)
     options = dataclasses.replace(options, checkpoint_settings=checkpoint, env_settings=env,
                                   check=values["check"], spec_path=values["spec_path"],
-                                  capture_spec=values["capture_spec"])
+                                  capture_spec=values["capture_spec"],
+                                  max_steps_override=values["max_steps_override"])
     check_run_options(options)
     return options

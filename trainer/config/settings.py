@@ -225,6 +225,9 @@ class RunOptions:
     check: bool = False
     spec_path: str | None = None
     capture_spec: str | None = None
+    #: --max-steps N: every behavior stops at N steps and summarizes at least every N / 10 (a short
+    #: CI run of a project's YAML, docs/mirror.md); configuration.yaml keeps the YAML's values
+    max_steps_override: int | None = None
 
     def behavior_settings(self, brain_name: str) -> TrainerSettings:
         """The settings for ``brain_name`` (no ``?team=``), with init_path resolved for
@@ -246,6 +249,10 @@ class RunOptions:
             if self.cli_deterministic:
                 network = dataclasses.replace(settings.network_settings, deterministic=True)
                 settings = dataclasses.replace(settings, network_settings=network)
+        if self.max_steps_override is not None:
+            settings = dataclasses.replace(settings, max_steps=self.max_steps_override,
+                                           summary_freq=min(settings.summary_freq,
+                                                            max(self.max_steps_override // 10, 1)))
         init_dir = self.checkpoint_settings.maybe_init_path
         if init_dir is not None:
             if settings.init_path is None:

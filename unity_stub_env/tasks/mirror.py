@@ -10,7 +10,7 @@ run's seed:
   hidden state  s in R^4, reset to N(0, 0.5^2) per agent
   observations  vectors: W_i s + N(0, 0.05^2); cameras C x H x W: 4 vertical stripes, stripe k
                 showing sigmoid(2 s_k) (scaled per channel), so a CNN can read s
-  target        continuous: t = tanh(K s); discrete branch b of n options: argmax(K_b s)
+  target        continuous: t = tanh(3 K s) (mostly near +-1); discrete branch b of n options: argmax(K_b s)
   score         mean over action components of 1 - |clip(a) - t| (continuous, in [-1, 1]) and
                 1 if the branch's choice is the target else 0 (discrete); random play scores
                 ~0.3 per continuous component and 1/n per branch, the target policy 1
@@ -39,6 +39,7 @@ DEFAULT_MAX_STEP = 100
 STEP_REWARD_SCALE = 0.1
 FAIL_REWARD = -1.0
 BOUND = 4.0
+TARGET_GAIN = 3.0  # mostly saturated targets: the sign of the mean action is most of the score
 
 
 class MirrorTask(Task):
@@ -112,7 +113,7 @@ class MirrorTask(Task):
 
     def targets(self) -> tuple[np.ndarray, list[np.ndarray]]:
         """The best actions now: (continuous float [n, c], per branch int [n])."""
-        continuous = np.tanh(self.state @ self.target_continuous.T)
+        continuous = np.tanh(TARGET_GAIN * self.state @ self.target_continuous.T)
         return continuous, [np.argmax(self.state @ k.T, axis=1) for k in self.target_branches]
 
     def step(self, continuous: np.ndarray, discrete: np.ndarray) -> TaskStep:
