@@ -1,6 +1,9 @@
 """``mlagents-like-learn CONFIG --check --spec FILE``: the trainer YAML against a game's behavior
 specs (a behaviors.json, docs/mirror.md), without a simulator and without training.
 
+What the YAML alone gets wrong (batch_size > buffer_size, sequence_length > batch_size, unknown
+keys, ...) the loader refuses before this runs, with its usual one-line message and exit 2.
+
 ``spec_problems`` returns one line per problem; ``run_check`` prints them and gives the exit code
 (0: none, 2: some). What is checked is listed in docs/mirror.md ("Checking a YAML").
 """
@@ -55,10 +58,7 @@ def spec_problems(options: RunOptions, spec: SpecFile) -> list[str]:
 def _settings_problems(brain: str, ts: TrainerSettings, spec: SpecFile) -> list[str]:
     where = f"behaviors.{brain}"
     found = []
-    hp = ts.hyperparameters
-    if hp.batch_size > hp.buffer_size:
-        found.append(f"'{where}.hyperparameters.batch_size' ({hp.batch_size}) is larger than buffer_size "
-                     f"({hp.buffer_size}): an update needs a full batch; make buffer_size a multiple of it.")
+    hp = ts.hyperparameters  # batch_size > buffer_size and sequence_length > batch_size: the loader refuses them
     memory = ts.network_settings.memory
     if memory is not None:
         if memory.sequence_length > ts.time_horizon:
