@@ -18,6 +18,9 @@ from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, Observatio
 
 FORMAT_VERSION = 1
 COMPRESSIONS = ("none", "png")  # ObservationProto.compression_type NONE 0, PNG 1
+# dimension_properties a hand-written entry gets, by rank, as Unity's sensors send them: a vector
+# (NONE), an entity list (VARIABLE_SIZE, NONE), a C x H x W camera (NONE, TRANSLATIONAL_EQUIVARIANCE x 2)
+_DEFAULT_PROPERTIES = {1: [1], 2: [4, 1], 3: [1, 2, 2]}
 
 
 class SpecFileError(ValueError):
@@ -158,7 +161,7 @@ def _behavior_from_dict(raw: Any, where: str) -> BehaviorRecord:
         shape = obs.get("shape")
         if not isinstance(shape, list) or not shape or not all(isinstance(d, int) and d > 0 for d in shape):
             raise SpecFileError(f"{at}: 'shape' must be a list of positive integers, got {shape!r}.")
-        props = obs.get("dimension_properties") or ([1] * len(shape) if len(shape) == 1 else [0] * len(shape))
+        props = obs.get("dimension_properties") or _DEFAULT_PROPERTIES.get(len(shape), [0] * len(shape))
         try:
             dims = tuple(DimensionProperty(int(p)) for p in props)
             obs_type = ObservationType[str(obs.get("observation_type", "default")).upper()]

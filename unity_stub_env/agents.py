@@ -191,7 +191,7 @@ def _observation_frame(spec: ObservationSpec) -> tuple[bytes, bytes]:
 
 def _png_fields(spec: ObservationSpec, observations: np.ndarray) -> list[bytes]:
     """One serialized PNG ObservationProto (field 13) per agent for a C x H x W camera in [0, 1]
-    (docs/protocol.md §3.3): 1 channel as a grayscale PNG, 3 as RGB, any other count as RGB PNGs
+    (docs/protocol.md §3.3): 1 channel as a gray RGB PNG, 3 as RGB, any other count as RGB PNGs
     of 3 channels each, concatenated, with ``compressed_channel_mapping`` (-1 for padding)."""
     channels = spec.shape[0]
     mapping = [] if channels in (1, 3) else [c if c < channels else -1 for c in range(3 * -(-channels // 3))]
@@ -211,23 +211,23 @@ def _png_fields(spec: ObservationSpec, observations: np.ndarray) -> list[bytes]:
     pixels = np.clip(np.rint(np.asarray(observations, dtype=np.float32) * 255.0), 0, 255).astype(np.uint8)
     fields = []
     for agent in pixels:
-        data = _png_bytes(agent, gray=True) if channels == 1 else b"".join(
-            _png_bytes(agent[c:c + 3], gray=False) for c in range(0, channels, 3))
+        data = b"".join(_png_bytes(agent[c:c + 3]) for c in range(0, channels, 3))
         fields.append(wire.field(13, before + wire.field(3, data) + after))
     return fields
 
 
-def _png_bytes(chw: np.ndarray, gray: bool) -> bytes:
-    """One PNG file of uint8 [c, H, W]: grayscale (c = 1), else RGB with the channels past c
-    zero (the mapping drops them)."""
+def _png_bytes(chw: np.ndarray) -> bytes:
+    """One RGB PNG file of uint8 [c <= 3, H, W], as Unity's EncodeToPNG writes cameras: one
+    channel is repeated in all three (readers average them back to gray), missing channels of a
+    group are zero (the mapping drops them)."""
     from PIL import Image
 
-    if gray:
-        image = Image.fromarray(chw[0], mode="L")
+    if chw.shape[0] == 1:
+        rgb = np.repeat(chw, 3, axis=0)
     else:
         rgb = np.zeros((3, *chw.shape[1:]), dtype=np.uint8)
         rgb[: chw.shape[0]] = chw
-        image = Image.fromarray(np.ascontiguousarray(np.moveaxis(rgb, 0, -1)), mode="RGB")
+    image = Image.fromarray(np.ascontiguousarray(np.moveaxis(rgb, 0, -1)), mode="RGB")
     out = io.BytesIO()
     image.save(out, format="PNG", compress_level=1)
     return out.getvalue()

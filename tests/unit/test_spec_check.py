@@ -10,7 +10,7 @@ from protos.spec_file import BehaviorRecord, SpecFile
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty as D, ObservationSpec, ObservationType
 from trainer.cli import main
 
-CAMERA = ObservationSpec((3, 30, 30), (D.TRANSLATIONAL_EQUIVARIANCE, D.TRANSLATIONAL_EQUIVARIANCE, D.NONE),
+CAMERA = ObservationSpec((3, 30, 30), (D.NONE, D.TRANSLATIONAL_EQUIVARIANCE, D.TRANSLATIONAL_EQUIVARIANCE),
                          ObservationType.DEFAULT, "CameraSensor")
 VECTOR = ObservationSpec((8,), (D.NONE,), ObservationType.DEFAULT, "VectorSensor_size8")
 SPEC = SpecFile(behaviors=(

@@ -20,7 +20,7 @@ from protos.types import (
 )
 from trainer.artifacts.behaviors import COUNT_STEPS, BehaviorRecorder
 
-CAMERA = ObservationSpec((3, 24, 32), (D.TRANSLATIONAL_EQUIVARIANCE, D.TRANSLATIONAL_EQUIVARIANCE, D.NONE),
+CAMERA = ObservationSpec((3, 24, 32), (D.NONE, D.TRANSLATIONAL_EQUIVARIANCE, D.TRANSLATIONAL_EQUIVARIANCE),
                          ObservationType.DEFAULT, "Camera")
 VECTOR = ObservationSpec((6,), (D.NONE,), ObservationType.GOAL_SIGNAL, "Goal")
 SPEC = BehaviorSpec((CAMERA, VECTOR), ActionSpec(2, (3, 2)))
@@ -39,7 +39,7 @@ def test_a_spec_file_survives_json_unchanged():
     assert again == original
     record = again.behaviors[0]
     assert (record.brain_name, record.team_id) == ("Striker", 1)
-    assert record.spec.observation_specs[0].dimension_property == (2, 2, 1)
+    assert record.spec.observation_specs[0].dimension_property == (1, 2, 2)
     assert record.spec.observation_specs[1].observation_type == ObservationType.GOAL_SIGNAL
 
 
@@ -47,7 +47,7 @@ def test_the_written_layout_is_the_documented_one():
     raw = json.loads(_spec_file().dumps())
     assert raw["format_version"] == 1 and raw["num_areas"] == 2
     assert raw["behaviors"][0]["observations"][0] == {
-        "name": "Camera", "shape": [3, 24, 32], "dimension_properties": [2, 2, 1],
+        "name": "Camera", "shape": [3, 24, 32], "dimension_properties": [1, 2, 2],
         "observation_type": "default", "compression": "png"}
     assert raw["behaviors"][0]["actions"] == {"continuous": 2, "discrete_branches": [3, 2]}
 
@@ -58,6 +58,10 @@ def test_a_hand_written_minimal_entry_gets_the_defaults():
     record = spec.behaviors[0]
     assert record.name == "Walker?team=0" and record.agents == 1 and record.compressions == ("none",)
     assert record.spec.observation_specs[0].dimension_property == (D.NONE,)
+    camera = SpecFile.from_dict({"format_version": 1, "behaviors": [
+        {"name": "Eye", "observations": [{"shape": [3, 36, 36], "compression": "png"}],
+         "actions": {"discrete_branches": [2]}}]}).behaviors[0].spec.observation_specs[0]
+    assert camera.dimension_property == (D.NONE, D.TRANSLATIONAL_EQUIVARIANCE, D.TRANSLATIONAL_EQUIVARIANCE)
     assert record.decision_period is None and record.max_step is None
 
 
