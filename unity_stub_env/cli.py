@@ -141,8 +141,9 @@ def main(argv: list[str] | None = None) -> int:
 
         return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path)
     if args.write_launcher is not None:
-        path = write_player_launcher(args.write_launcher, args.tasks,
-                                     extra_args=spin_wait_args(args.spin_wait_ms / 1e3) + transport_args(args.transport))
+        spec = ["--spec", os.path.abspath(args.spec)] if args.mirror is not None else []
+        path = write_player_launcher(args.write_launcher, args.tasks, extra_args=spin_wait_args(
+            args.spin_wait_ms / 1e3) + transport_args(args.transport) + spec)
         print(f"{path}  (use --env {path.with_suffix('')})")
         return 0
     if args.mlagents_port is None:

@@ -128,3 +128,11 @@ def test_png_cameras_of_any_channel_count_decode_exactly(channels):
     assert np.allclose(decision.obs[0], pixels, atol=1e-6)
     mapping = list(infos[0].observations[0].compressed_channel_mapping)
     assert mapping == ([] if channels in (1, 3) else [c if c < channels else -1 for c in range(-(-channels // 3) * 3)])
+
+
+def test_a_mirror_launcher_carries_its_spec(tmp_path, capsys):
+    spec = tmp_path / "game.json"
+    spec.write_text(SPEC.dumps())
+    assert stub_main(["--task", f"mirror={spec}", "--write-launcher", str(tmp_path / "builds")]) == 0
+    launcher = (tmp_path / "builds" / "StubMirror.x86_64").read_text()
+    assert f"--task mirror --spec {spec}" in launcher
