@@ -22,10 +22,10 @@ import resource
 import signal
 import sys
 
+from protos.spec_file import SpecFile, SpecFileError
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter, build_brain_parameters
 from unity_stub_env.communicator import TRANSPORTS, RpcCommunicator, SessionEnd, SideChannelState, encode_stats
-from protos.spec_file import SpecFile, SpecFileError
 from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher
 from unity_stub_env.task_names import MIRROR_TASK
 from unity_stub_env.tasks import TASKS, EnvironmentParameters, make_task
