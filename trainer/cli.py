@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import os
 import platform
+import signal
 import sys
 
 LOGO = r"""
@@ -108,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
         from trainer.stop import STOP
 
         STOP.install()
+        if hasattr(signal, "SIGXFSZ"):  # past `ulimit -f` a write fails with EFBIG (one message), no core dump
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         if options.capture_spec is not None:
             from trainer.run import capture_spec
 
