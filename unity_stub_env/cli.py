@@ -7,6 +7,8 @@
     unity-stub-env --list
     unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
                    [--evaluate-option KEY=VALUE]
+    unity-stub-env hmm train CORPUS -o MODEL [--states N --restarts R --method fast|baum-welch --seed S]
+    unity-stub-env hmm sample MODEL -n N --length L [--seed S]      (see unity_stub_env.hmm)
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
@@ -104,7 +106,12 @@ def _configure_logging(log_file: str | None) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args, unknown = build_parser().parse_known_args(_normalise_unity_flags(list(sys.argv[1:] if argv is None else argv)))
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "hmm":  # the HMM tools: unity-stub-env hmm train|sample ...
+        from unity_stub_env.hmm import main as hmm_main
+
+        return hmm_main(argv[1:])
+    args, unknown = build_parser().parse_known_args(_normalise_unity_flags(argv))
     if args.list:
         for task_class in TASKS.values():
             print(task_class.describe())
