@@ -27,6 +27,7 @@ from protos import side_channels as sc
 from protos.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer import crash_points
 from trainer.artifacts.atomic import WRITE_ERRNOS, results_write_error
+from trainer.artifacts.behaviors import BehaviorRecorder
 from trainer.artifacts.console import ConsoleWriter, ProgressLine
 from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, GaugeWriter, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
@@ -55,7 +56,7 @@ def run_dir_of(options) -> str:
     return os.path.join(ck.results_dir, ck.run_id)
 
 
-_STARTUP_FILES = re.compile(r"configuration\.yaml|run_logs/(timers\.json|training_status\.json|Player-\d+\.log)")
+_STARTUP_FILES = re.compile(r"configuration\.yaml|run_logs/(timers\.json|training_status\.json|behaviors\.json|Player-\d+\.log)")
 
 
 def only_startup_files(run_dir: str) -> bool:
@@ -173,6 +174,7 @@ class RunState:
     progress: ProgressLine
     routers: list[sc.SideChannelRouter]
     env_vars: EnvVars = field(default_factory=EnvVars)
+    recorder: BehaviorRecorder | None = None  # run_logs/behaviors.json
     runners: dict[str, BehaviorRunner] = field(default_factory=dict)
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
     pending_reset: bool = False
@@ -387,6 +389,8 @@ class RunState:
             if not res.side_channel:
                 continue
             incoming = self.routers[env_id].dispatch(res.side_channel)
+            if incoming.stats and self.recorder is not None:
+                self.recorder.observe_stats(key for key, _, _ in incoming.stats)
             if incoming.stats:
                 if brains is None:
                     brains = {brain_name_of(b)[0] for r in results for b in r.steps}
@@ -460,14 +464,9 @@ def check_torch_device(device: str | None) -> None:
         ) from error
 
 
-def run_training(options, env_vars: EnvVars | None = None) -> int:
-    """Train (or run inference) as configured; ``env_vars``: the MLAGENTS_LIKE_* choices read at
-    start (trainer/cli.py; the defaults if None). Returns the process exit code."""
-    env_vars = env_vars or EnvVars()
-    crash_points.arm(env_vars.crash_at)
-    ck = options.checkpoint_settings
+def pool_settings_of(options, env_vars: EnvVars) -> PoolSettings:
     env = options.env_settings
-    pool_settings = PoolSettings(
+    return PoolSettings(
         env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
         num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,
         bind=env.bind, no_graphics=options.engine_settings.no_graphics,
@@ -477,6 +476,60 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         restarts_rate_limit_period_s=env.restarts_rate_limit_period_s, debug=options.debug,
         spin_wait_s=env_vars.spin_wait_s, transport=env_vars.transport,
     )
+
+
+def behavior_recorder(options) -> BehaviorRecorder:
+    env = options.env_settings
+    return BehaviorRecorder(env.num_areas, env.env_path or "editor", tuple(options.environment_parameters))
+
+
+CAPTURE_STEPS = 20  # exchanges --capture-spec watches before it writes the file
+
+
+def capture_spec(options, env_vars: EnvVars | None = None, steps: int = CAPTURE_STEPS) -> int:
+    """``--capture-spec FILE``: connect to the simulator(s), step ``steps`` times with zero
+    actions, write what was seen to FILE (docs/mirror.md) and exit without training."""
+    env_vars = env_vars or EnvVars()
+    path = options.capture_spec
+    params = EnvironmentParameterManager(options.environment_parameters, options.env_settings.seed, {})
+    side_channel = sc.pack_messages(environment_parameter_messages(params)
+                                    + engine_config_messages(options.engine_settings))
+    pool = EnvPool(pool_settings_of(options, env_vars), initial_side_channel=lambda: side_channel)
+    recorder = behavior_recorder(options)
+    routers = make_routers(pool.num_envs)
+    try:
+        pool.start()
+        results = pool.reset(side_channel)
+        for _ in range(steps):
+            STOP.check()
+            recorder.observe(results)
+            for router, res in zip(routers, results):
+                if res.side_channel:
+                    recorder.observe_stats(key for key, _, _ in router.dispatch(res.side_channel).stats)
+            results = pool.step([{} for _ in results], b"").results
+        recorder.observe(results)
+    except KeyboardInterrupt:
+        logger.info("Stopped before the capture finished; nothing written.")
+        return EXIT_STOPPED
+    finally:
+        pool.close()
+    if not recorder.write(path):
+        raise UserError(f"--capture-spec: the simulator sent no agent in {steps} steps, so there is no "
+                        "behavior spec to record; check that the scene's agents request decisions.")
+    spec = recorder.spec_file()
+    logger.info("Wrote the specs of %d behavior(s) to %s: %s", len(spec.behaviors), path,
+                ", ".join(f"{b.name} ({b.agents} agents)" for b in spec.behaviors))
+    return 0
+
+
+def run_training(options, env_vars: EnvVars | None = None) -> int:
+    """Train (or run inference) as configured; ``env_vars``: the MLAGENTS_LIKE_* choices read at
+    start (trainer/cli.py; the defaults if None). Returns the process exit code."""
+    env_vars = env_vars or EnvVars()
+    crash_points.arm(env_vars.crash_at)
+    ck = options.checkpoint_settings
+    env = options.env_settings
+    pool_settings = pool_settings_of(options, env_vars)
     state: RunState | None = None
     # resolves --env first: a wrong path must not leave a results folder that blocks the rerun
     pool = EnvPool(pool_settings, initial_side_channel=lambda: state.initial_side_channel())
@@ -494,7 +547,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
     reporter = StatsReporter([tb, ConsoleWriter(logger, progress=progress), GaugeWriter(timers)])
     write_run_options(options, run_dir)
     state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
-                     make_routers(env.num_envs), env_vars)
+                     make_routers(env.num_envs), env_vars, behavior_recorder(options))
     for line in params.describe():
         logger.info(line)
     stopped = write_failed = False
@@ -512,6 +565,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
             results = pool.reset(state.initial_side_channel())
         while True:
             STOP.check()  # stop signals take effect here, between steps (trainer.stop)
+            state.recorder.observe(results)
             state.side_channel_in(results)
             trajectories: list = []
             actions, decided = state.decide(results)
@@ -572,13 +626,16 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
 
 
 def finish_run(state: RunState) -> None:
-    """Final checkpoint + ONNX per brain, training_status.json, timers.json, configuration.yaml."""
+    """Final checkpoint + ONNX per brain, training_status.json, timers.json, configuration.yaml,
+    behaviors.json."""
     run_dir = state.run_dir
     for runner in state.runners.values():
         if runner.training and runner.trainer.step > 0:
             runner.save_checkpoint(state.status, final=True)
     if not state.options.checkpoint_settings.inference:  # inference leaves the training record alone
         state.save_status()
+    if state.recorder is not None:
+        state.recorder.write(os.path.join(run_dir, "run_logs", "behaviors.json"))
     state.timers.write(os.path.join(run_dir, "run_logs", "timers.json"))
     state.reporter.close()
     write_run_options(state.options, run_dir)

@@ -19,6 +19,8 @@ logger = logging.getLogger("mlagents_like")
 
 SCHEDULES = ("linear", "constant")
 ENCODER_TYPES = ("simple", "nature_cnn", "resnet", "match3", "fully_connected")
+# the smallest camera height and width each vis_encode_type takes (ML-Agents' limits)
+ENCODER_MIN_SIZE = {"simple": 20, "nature_cnn": 36, "resnet": 15, "match3": 5, "fully_connected": 1}
 CONDITIONING_TYPES = ("hyper", "none")
 TRAINER_TYPES = ("ppo", "sac", "poca")
 TRAINABLE_TRAINER_TYPES = ("ppo", "sac")
@@ -244,6 +246,14 @@ class RunOptions:
     config_path: str | None = None
     #: --deterministic given on the CLI: also applies to behaviors that get plain defaults.
     cli_deterministic: bool = False
+    #: what to do instead of training (command line only, not in configuration.yaml; docs/mirror.md):
+    #: --check the YAML against --spec FILE, or --capture-spec FILE (record the behaviors and exit)
+    check: bool = False
+    spec_path: str | None = None
+    capture_spec: str | None = None
+    #: --max-steps N: every behavior stops at N steps and summarizes at least every N / 10 (a short
+    #: CI run of a project's YAML, docs/mirror.md); configuration.yaml keeps the YAML's values
+    max_steps_override: int | None = None
 
     def behavior_settings(self, brain_name: str) -> TrainerSettings:
         """The settings for ``brain_name`` (no ``?team=``), with init_path resolved for
@@ -265,6 +275,10 @@ class RunOptions:
             if self.cli_deterministic:
                 network = dataclasses.replace(settings.network_settings, deterministic=True)
                 settings = dataclasses.replace(settings, network_settings=network)
+        if self.max_steps_override is not None:
+            settings = dataclasses.replace(settings, max_steps=self.max_steps_override,
+                                           summary_freq=min(settings.summary_freq,
+                                                            max(self.max_steps_override // 10, 1)))
         init_dir = self.checkpoint_settings.maybe_init_path
         if init_dir is not None:
             if settings.init_path is None:

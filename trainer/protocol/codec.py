@@ -247,14 +247,19 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec],
     agent_infos = output.rl_output.agentInfos
     lists = lists or {}
     new_specs: dict[str, BehaviorSpec] = {}
+    compressions: dict[str, tuple[str, ...]] = {}
     for brain_params in output.rl_initialization_output.brain_parameters:
         name = brain_params.brain_name
         if name in lists:
             data, (starts, lengths, _) = lists[name]
             first = _parse(name, agent_info_pb2.AgentInfoProto, data[starts[0]:starts[0] + lengths[0]])
-            new_specs[name] = behavior_spec_from_proto(brain_params, first)
         elif name in agent_infos and len(agent_infos[name].value) > 0:
-            new_specs[name] = behavior_spec_from_proto(brain_params, agent_infos[name].value[0])
+            first = agent_infos[name].value[0]
+        else:
+            continue
+        new_specs[name] = behavior_spec_from_proto(brain_params, first)
+        compressions[name] = tuple("png" if o.compression_type == observation_pb2.PNG else "none"
+                                   for o in first.observations)
     for name, spec in new_specs.items():
         known = known_specs.get(name)
         if known is not None and _network_shape(known) != _network_shape(spec):
@@ -279,7 +284,8 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec],
             steps[name] = steps_from_agent_infos(name, agent_infos[name].value, spec)
         else:
             steps[name] = (DecisionSteps.empty(spec), TerminalSteps.empty(spec))
-    return StepResult(specs=new_specs, steps=steps, side_channel=output.rl_output.side_channel)
+    return StepResult(specs=new_specs, steps=steps, side_channel=output.rl_output.side_channel,
+                      compressions=compressions)
 
 
 def _network_shape(spec: BehaviorSpec) -> tuple:
