@@ -430,7 +430,7 @@ class MimicTask(Task):
 # with each impulse of PUSH_LADDER (N s; 70 kg: 10 N s changes the whole body's velocity by
 # 0.14 m/s), in a random horizontal direction at the torso.
 EVAL_SECONDS = 10.0
-PUSH_LADDER = (10.0, 20.0, 30.0, 40.0)
+PUSH_LADDER = (10.0, 15.0, 20.0, 30.0)
 PUSH_EVAL_INTERVAL = 2.0
 
 
