@@ -40,7 +40,8 @@ forearms, thighs, shanks, feet: ``OBSERVED``; the hands are welded, so their sta
 pelvis' is its world orientation), the linear velocity and the angular velocity, and the position
 relative to the pelvis (for the pelvis: 0, 0, its height above the floor), all three vectors in the
 pelvis frame; then the phase of the reference in [0, 1) (frame / frames; 0 for ``stand``). The
-reference pose itself is not observed.
+reference pose itself is not observed. Observations and rewards read MuJoCo's kinematics after the
+decision's last ``mj_step``, i.e. of the state one 0.004 s step earlier (what ``mj_step`` leaves).
 
 Reference motions (``mimic_motions``: stand, arms, squat, walk, CSV files at 50 Hz made by
 ``python -m unity_stub_env.tasks.mimic_motions``), chosen per episode by the environment parameter
