@@ -123,10 +123,24 @@ def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+    """Hamilton product of quaternions (w, x, y, z) [..., 4]."""
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = aw * bw - ax * bx - ay * by - az * bz
+    out[..., 1] = aw * bx + ax * bw + ay * bz - az * by
+    out[..., 2] = aw * by - ax * bz + ay * bw + az * bx
+    out[..., 3] = aw * bz + ax * by - ay * bx + az * bw
+    return out
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b for [..., 3] arrays (np.cross's axis handling costs more than the product here)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def quat_conj(q: np.ndarray) -> np.ndarray:
@@ -342,7 +356,7 @@ class MimicTask(Task):
         pelvis_pos = data.xpos[self.pelvis]
         angular = data.cvel[self.parts, :3]
         offset = data.xpos[self.parts] - data.subtree_com[self.pelvis][:, None, :]
-        linear = data.cvel[self.parts, 3:] + np.cross(angular, offset)  # cvel is about the root subtree CoM
+        linear = data.cvel[self.parts, 3:] + cross(angular, offset)  # cvel is about the root subtree CoM
         relative = data.xpos[self.parts] - pelvis_pos[:, None, :]
         to_local = lambda v: np.einsum("nji,nkj->nki", rot, v)  # noqa: E731  R^T v for every part
         position = to_local(relative)
@@ -407,7 +421,7 @@ class MimicTask(Task):
         com_error = data.subtree_com[self.pelvis] - (anchor + ref.com[rows])
         com_sq = (com_error**2).sum(axis=1)
         end_sq = ((data.geom_xpos[self.ends] - (anchor[:, None, :] + ref.end[rows])) ** 2).sum(axis=(1, 2))
-        pelvis_speed = data.cvel[self.pelvis, 4] + np.cross(data.cvel[self.pelvis, :3], data.xpos[self.pelvis]
+        pelvis_speed = data.cvel[self.pelvis, 4] + cross(data.cvel[self.pelvis, :3], data.xpos[self.pelvis]
                                                             - data.subtree_com[self.pelvis])[:, 1]
         speed_sq = (pelvis_speed - ref.speed[self.motion]) ** 2
         return reward_terms(rot_sq, vel_sq, com_sq, end_sq, speed_sq, self.scales), np.sqrt(com_sq)
