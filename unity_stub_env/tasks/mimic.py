@@ -178,8 +178,8 @@ class Reference:
         for name in MOTIONS:
             q = load_motion(name).qpos
             count = len(q)
-            step = (q[-1, 1] - q[-2, 1]) if name == "walk" else 0.0
-            stride.append(q[-1, 1] + step if name == "walk" else 0.0)
+            # the walk advances by one stride per loop: its last advance plus one more frame's
+            stride.append(2 * q[-1, 1] - q[-2, 1] if name == "walk" else 0.0)
             after = q[np.arange(1, count + 1) % count].copy()
             before = q[np.arange(-1, count - 1) % count].copy()
             after[-1, 1] += stride[-1]
@@ -267,7 +267,6 @@ class MimicTask(Task):
         # per-agent episode state
         self.motion = np.zeros(n, dtype=np.int64)
         self.frame = np.zeros(n, dtype=np.int64)  # index within the motion's clip
-        self.cycles = np.zeros(n, dtype=np.int64)  # walk: completed loops (stride offsets)
         self.episode_step = np.zeros(n, dtype=np.int64)
         self.weights = np.zeros((n, 5))
         self.scales = np.tile(SCALES, (n, 1))
@@ -309,7 +308,6 @@ class MimicTask(Task):
         frames = self.ref.frames[motion]
         rsi = get("rsi", 1, count) > 0.5
         self.frame[agents] = np.where(rsi, (self.rng.random(count) * frames).astype(np.int64), 0)
-        self.cycles[agents] = 0
         self.episode_step[agents] = 0
         self.term_sum[agents] = 0.0
         preset = np.rint(get("reward_weights", 0, count))
@@ -389,9 +387,7 @@ class MimicTask(Task):
         # advance the reference
         frames = self.ref.frames[self.motion]
         self.frame += 1
-        wrapped = self.frame >= frames
-        self.cycles += wrapped
-        self.frame[wrapped] = 0
+        self.frame[self.frame >= frames] = 0
         rows = self.ref_rows()
         terms, drift = self.compare(rows)
         rewards = (self.weights * terms).sum(axis=1)
