@@ -247,3 +247,20 @@ def test_dodge_configs_carry_the_thesis_values_and_agree(caplog):
         assert dodge.reward_signals["extrinsic"].gamma == 0.995
         assert (dodge.max_steps, dodge.time_horizon) == (5_000_000, 1000)
     assert modern.hyperparameters == legacy.hyperparameters and modern.network_settings == legacy.network_settings
+
+
+def test_mimic_config_carries_the_thesis_values():
+    """configs/mimic.yaml: seed 001's final hyperparameters (batch 1000, buffer 20000, lr 1e-4 linear,
+    beta 5e-4, epsilon 0.2, lambd 0.95, 2 epochs, normalize, 2 x 1024, gamma 0.99, horizon 1250,
+    5e7 steps, checkpoints every 200k, summaries every 25k) and the motion parameter (0, stand)."""
+    options = load_run_options(os.path.join(REPO, "configs", "mimic.yaml"))
+    mimic = options.behaviors["Mimic"]
+    hp, net = mimic.hyperparameters, mimic.network_settings
+    assert (hp.batch_size, hp.buffer_size, hp.learning_rate, hp.beta, hp.epsilon, hp.lambd, hp.num_epoch) == (
+        1000, 20000, 1e-4, 5e-4, 0.2, 0.95, 2)
+    assert hp.learning_rate_schedule == "linear"
+    assert (net.normalize, net.num_layers, net.hidden_units) == (True, 2, 1024)
+    assert mimic.reward_signals["extrinsic"].gamma == 0.99 and mimic.reward_signals["extrinsic"].strength == 1.0
+    assert (mimic.max_steps, mimic.time_horizon, mimic.summary_freq, mimic.checkpoint_interval,
+            mimic.keep_checkpoints) == (50_000_000, 1250, 25000, 200000, 5)
+    assert set(options.environment_parameters) == {"motion"}
