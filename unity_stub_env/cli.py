@@ -5,6 +5,7 @@
                    [--spin-wait-ms MS] [--transport {http2,grpcio}]
     unity-stub-env --list
     unity-stub-env --task dodge --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
+    unity-stub-env creature --kind quadruped|biped|lsystem --seed S [--mjcf OUT.xml]
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
@@ -93,7 +94,12 @@ def _configure_logging(log_file: str | None) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args, unknown = build_parser().parse_known_args(_normalise_unity_flags(list(sys.argv[1:] if argv is None else argv)))
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "creature":  # a generated creature's MJCF (unity_stub_env.creatures)
+        from unity_stub_env.creatures import main as creature_main
+
+        return creature_main(argv[1:])
+    args, unknown = build_parser().parse_known_args(_normalise_unity_flags(argv))
     if args.list:
         for task_class in TASKS.values():
             print(task_class.describe())
