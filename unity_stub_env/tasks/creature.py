@@ -269,8 +269,11 @@ class CreatureTask(Task):
 
     def _new_terrain(self, agent: int, roughness: float, obstacles: int) -> None:
         adr = self.hfield_adr[agent]
-        noise = perlin((HFIELD_SIZE, HFIELD_SIZE), NOISE_CELL * (HFIELD_SIZE - 1) / (2 * ARENA_HALF), self.rng)
-        self.model.hfield_data[adr: adr + HFIELD_SIZE * HFIELD_SIZE] = (roughness * noise).ravel()
+        if roughness > 0:  # flat ground skips the noise (15 % of a random policy's step time)
+            noise = perlin((HFIELD_SIZE, HFIELD_SIZE), NOISE_CELL * (HFIELD_SIZE - 1) / (2 * ARENA_HALF), self.rng)
+            self.model.hfield_data[adr: adr + HFIELD_SIZE * HFIELD_SIZE] = (roughness * noise).ravel()
+        else:
+            self.model.hfield_data[adr: adr + HFIELD_SIZE * HFIELD_SIZE] = 0.0
         geoms = self.obstacle_geom[agent]
         self.model.geom_pos[geoms] = PARK
         for k in range(obstacles):
