@@ -158,3 +158,18 @@ def test_a_standing_creature_is_interrupted_at_max_step():
         assert bool(result.done[0]) == (step == 29)
     assert result.interrupted.tolist() == [True]
     assert result.rewards[0] < 0.05  # standing still earns (almost) nothing: the speed term is ~0
+
+
+def test_the_task_is_deterministic_for_a_seed():
+    params = dict(terrain_roughness=0.4, obstacles=2)
+    actions = np.random.default_rng(1).uniform(-1, 1, (40, 2, generate("quadruped", 0).num_hinges()))
+    runs = []
+    for seed in (5, 5, 6):
+        task = make_task("creature", num_areas=2, seed=seed, env_params=_params(**params))
+        trace = [task.observe()[0].copy()]
+        for action in actions:
+            result = task.step(action, np.zeros((2, 0)))
+            task.reset(result.done)
+            trace.append(task.observe()[0].copy())
+        runs.append(np.stack(trace))
+    assert np.array_equal(runs[0], runs[1]) and not np.array_equal(runs[0], runs[2])
