@@ -173,3 +173,15 @@ def test_the_task_is_deterministic_for_a_seed():
             trace.append(task.observe()[0].copy())
         runs.append(np.stack(trace))
     assert np.array_equal(runs[0], runs[1]) and not np.array_equal(runs[0], runs[2])
+
+
+def test_shipped_config_names_only_parameters_the_task_reads():
+    import os
+
+    from tests.stub.conftest import REPO
+    from trainer.config.cli_args import parse_run_options
+    from unity_stub_env.tasks.creature import DEFAULTS
+
+    options = parse_run_options([os.path.join(REPO, "configs", "creature.yaml"), "--env", "stub:creature"])
+    assert list(options.behaviors) == ["Creature"]
+    assert set(options.environment_parameters) <= set(DEFAULTS)
