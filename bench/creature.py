@@ -15,9 +15,9 @@
   physics share = raw time per control step / the row's. Best of ``--repeats`` blocks.
 
 ``evaluate``: each POLICY (a trained ``.onnx``, ``zero`` or ``random``) drives every arena for
-``--minutes`` of simulated time per agent (episodes restart when they end): targets reached and
-distance covered by the centre of mass per minute of simulated time, falls per minute, mean reward
-per step (``unity_stub_env.tasks.creature.run_policy``).
+``--minutes`` of simulated time per agent (episodes restart when they end): targets reached,
+distance covered by the centre of mass (path length, and progress towards the target) per minute
+of simulated time, falls per minute, mean reward per step (``unity_stub_env.tasks.creature.run_policy``).
 Both print markdown tables and write JSON to bench/out/creature_<command>.json.
 """
 from __future__ import annotations
@@ -123,11 +123,11 @@ def evaluate_command(args) -> dict:
         results[policy] = run_policy(task, load_policy(policy, size, actions, args.seed), control_steps)
     print(f"{args.kind} seed {args.creature_seed}, roughness {args.roughness}, {args.areas} arenas x "
           f"{args.minutes} simulated min")
-    print("| policy | targets / min | distance m / min | falls / min | mean reward / step |")
-    print("|---|---|---|---|---|")
+    print("| policy | targets / min | distance m / min | towards target m / min | falls / min | mean reward / step |")
+    print("|---|---|---|---|---|---|")
     for policy, r in results.items():
         print(f"| {policy} | {r['targets_per_minute']:.2f} | {r['distance_per_minute']:.1f} | "
-              f"{r['falls_per_minute']:.1f} | {r['mean_reward']:.3f} |")
+              f"{r['progress_per_minute']:.1f} | {r['falls_per_minute']:.1f} | {r['mean_reward']:.3f} |")
     return {"results": results}
 
 

@@ -185,3 +185,17 @@ def test_shipped_config_names_only_parameters_the_task_reads():
     options = parse_run_options([os.path.join(REPO, "configs", "creature.yaml"), "--env", "stub:creature"])
     assert list(options.behaviors) == ["Creature"]
     assert set(options.environment_parameters) <= set(DEFAULTS)
+
+
+def test_run_policy_counts_per_simulated_minute():
+    from unity_stub_env.tasks.creature import run_policy
+
+    task = make_task("creature", num_areas=2, seed=0)
+    out = run_policy(task, lambda obs: np.zeros((len(obs), task.action_spec.continuous_size), np.float32), 60)
+    assert out["agent_minutes"] == pytest.approx(2 * 60 * 0.05 / 60)
+    assert out["targets_per_minute"] == 0.0 and out["falls_per_minute"] == 0.0  # holding the rest pose
+    assert abs(out["progress_per_minute"]) < 1.0 and out["distance_per_minute"] < 2.0
+    # a reached target counts once: put agent 0's target under its CoM
+    task.target[0, :2] = task.data.subtree_com[task.root[0], :2]
+    out = run_policy(task, lambda obs: np.zeros((len(obs), task.action_spec.continuous_size), np.float32), 1)
+    assert out["targets_per_minute"] == pytest.approx(1 / (2 * 0.05 / 60))
