@@ -17,7 +17,8 @@
 ``evaluate``: each POLICY (a trained ``.onnx``, ``zero`` or ``random``) drives every arena for
 ``--minutes`` of simulated time per agent (episodes restart when they end): targets reached,
 distance covered by the centre of mass (path length, and progress towards the target) per minute
-of simulated time, falls per minute, mean reward per step (``unity_stub_env.tasks.creature.run_policy``).
+of simulated time, falls per minute, mean reward per step (``unity_stub_env.tasks.creature.run_policy``). An ``.onnx`` policy acts with its mean
+action, or with ``--sample`` with its sampled actions (as while training; the ONNX graph draws the noise).
 Both print markdown tables and write JSON to bench/out/creature_<command>.json.
 """
 from __future__ import annotations
@@ -111,6 +112,15 @@ def steps_command(args) -> dict:
     return {"results": results}
 
 
+def _sampling(path: str):
+    """The ONNX model's sampled actions (its ``continuous_actions`` output: the mean plus its own
+    Gaussian noise), as the policy acts while it trains; ``load_policy`` takes the mean."""
+    import onnxruntime
+
+    session = onnxruntime.InferenceSession(path, providers=["CPUExecutionProvider"])
+    return lambda obs: session.run(["continuous_actions"], {"obs_0": np.asarray(obs, np.float32)})[0]
+
+
 def evaluate_command(args) -> dict:
     task = make_task("creature", num_areas=args.areas, seed=args.seed,
                      env_params=_params(args.kind, args.creature_seed, args.roughness))
@@ -120,9 +130,12 @@ def evaluate_command(args) -> dict:
     for policy in dict.fromkeys([*args.policies, "zero", "random"]):
         task = make_task("creature", num_areas=args.areas, seed=args.seed,
                          env_params=_params(args.kind, args.creature_seed, args.roughness))
-        results[policy] = run_policy(task, load_policy(policy, size, actions, args.seed), control_steps)
+        act = load_policy(policy, size, actions, args.seed)
+        if args.sample and policy.endswith(".onnx"):
+            act = _sampling(policy)
+        results[policy] = run_policy(task, act, control_steps)
     print(f"{args.kind} seed {args.creature_seed}, roughness {args.roughness}, {args.areas} arenas x "
-          f"{args.minutes} simulated min")
+          f"{args.minutes} simulated min, {'sampled' if args.sample else 'mean'} actions")
     print("| policy | targets / min | distance m / min | towards target m / min | falls / min | mean reward / step |")
     print("|---|---|---|---|---|---|")
     for policy, r in results.items():
@@ -144,6 +157,8 @@ def main() -> None:
     evaluate.add_argument("--areas", type=int, default=8)
     evaluate.add_argument("--minutes", type=float, default=2.0)
     evaluate.add_argument("--seed", type=int, default=0)
+    evaluate.add_argument("--sample", action="store_true",
+                          help="act with the .onnx policies' sampled actions (as in training) instead of their mean")
     for p in (steps, evaluate):
         p.add_argument("--kind", choices=KINDS, default="quadruped")
         p.add_argument("--creature-seed", type=int, default=7)
