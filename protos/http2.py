@@ -63,6 +63,7 @@ REFUSED_STREAM, CANCEL, COMPRESSION_ERROR, ENHANCE_YOUR_CALM = 0x7, 0x8, 0x9, 0x
 
 # gRPC status codes used here
 GRPC_OK, GRPC_INTERNAL, GRPC_UNIMPLEMENTED, GRPC_RESOURCE_EXHAUSTED = 0, 13, 12, 8
+GRPC_FAILED_PRECONDITION = 9
 
 MAX_WINDOW = (1 << 31) - 1
 DEFAULT_WINDOW = 65535
@@ -73,6 +74,9 @@ MAX_HEADER_BLOCK = 1 << 16  # encoded, over HEADERS + CONTINUATION frames
 MAX_CONTINUATIONS = 64  # CONTINUATION frames per block (empty ones would never reach the size limit)
 MAX_STREAMS = 16  # calls open at once; a simulator makes one at a time
 MAX_UNSENT = 1 << 20  # replies a client leaves unread (PING flood) before it is disconnected
+MAX_CONNECTIONS = 8  # open at once; past this the longest-idle one other than the session's is closed
+PREFACE_TIMEOUT_S = 10.0  # to send the preface and SETTINGS (a slow-loris client is closed after it)
+IDLE_TIMEOUT_S = 60.0  # a connection other than the session's, without a call in flight, is closed after it
 _SEND_TIMEOUT_S = 30.0
 OUR_SETTINGS = struct.pack(">HIHIHIHIHI", SETTINGS_ENABLE_PUSH, 0, SETTINGS_MAX_CONCURRENT_STREAMS, MAX_STREAMS,
                            SETTINGS_INITIAL_WINDOW_SIZE, MAX_WINDOW, SETTINGS_MAX_FRAME_SIZE, OUR_MAX_FRAME,
@@ -82,7 +86,8 @@ OUR_SETTINGS = struct.pack(">HIHIHIHIHI", SETTINGS_ENABLE_PUSH, 0, SETTINGS_MAX_
 class _ReadBuffer:
     """One preallocated receive buffer: ``recv(1 MiB)`` allocates (and maps) a fresh 1 MiB
     object on every call, which cost 13-32 us for a 14 KB message here; ``recv_into`` this
-    buffer then appending the bytes read costs ~6 us."""
+    buffer then appending the bytes read costs ~6 us. One per transport, shared by its
+    connections (one thread reads them all): an idle connection holds no buffer of its own."""
 
     __slots__ = ("_view",)
 
@@ -236,7 +241,8 @@ class _Connection:
         self.transport = transport
         self.peer = _peer_name(sock)
         self.buffer = bytearray()
-        self._reader = _ReadBuffer()
+        self._reader = transport.reader
+        self.opened_at = self.active_at = time.monotonic()  # active: its last complete request
         self.preface_seen = False
         self.settings_seen = False  # the preface must be followed by SETTINGS
         self.decoder = CachingDecoder()
@@ -446,6 +452,10 @@ class _Connection:
         if stream_id <= self.last_stream:
             raise Http2Error(f"stream id {stream_id} is not above the last one ({self.last_stream})")
         self.last_stream = stream_id
+        refusal = self.transport.refusal(self)
+        if refusal is not None:
+            self.send_error(stream_id, GRPC_FAILED_PRECONDITION, refusal, flush=False)
+            raise Http2Error(refusal, NO_ERROR)
         if len(self.streams) >= MAX_STREAMS:
             self._reset(stream_id, REFUSED_STREAM, f"more than {MAX_STREAMS} calls at once")
             return
@@ -490,6 +500,11 @@ class _Connection:
             if len(stream.body) > limit:
                 self._refuse(stream_id, stream, GRPC_RESOURCE_EXHAUSTED,
                              f"message larger than the server's limit of {self.transport.max_message_bytes} bytes")
+            elif len(self.streams) > 1 and sum(len(s.body) for s in self.streams.values()) > limit:
+                # several streams may not together buffer more than one message may hold
+                self._refuse(stream_id, stream, GRPC_RESOURCE_EXHAUSTED,
+                             f"requests buffered at once larger than the server's limit of "
+                             f"{self.transport.max_message_bytes} bytes")
         if flags & END_STREAM:
             self._end_stream(stream_id, calls)
 
@@ -511,6 +526,7 @@ class _Connection:
         else:
             call = IncomingCall(self, stream_id, bytes(body[5:]))
             stream.body = bytearray()
+            self.active_at = time.monotonic()
             self.pending[stream_id] = call
             calls.append(call)
 
@@ -654,6 +670,30 @@ class _Connection:
         self.pending.clear()  # answered with 400 by the endpoint already; nothing to cancel
         self.drop("the server closed")
 
+    def close_with(self, code: int, why: str) -> None:
+        """A connection the server ends on its own account: one log line, GOAWAY, closed."""
+        logger.warning("Closing the connection from %s: %s", self.peer, why)
+        if not self.closed:
+            self.out += frame(GOAWAY, 0, 0, struct.pack(">II", self.last_stream, code) + why.encode()[:200])
+            self.flush(wait=False)
+        self.drop(why)
+
+    def at_eof(self) -> bool:
+        """The client has closed its end (a peek, nothing is consumed)."""
+        if self.closed:
+            return True
+        try:
+            if not select.select([self.sock], [], [], 0.0)[0]:
+                return False  # (recv on a socket with a timeout would wait for data first)
+            return self.sock.recv(1, socket.MSG_PEEK) == b""
+        except (ConnectionError, ValueError):
+            return True
+        except OSError:
+            return False
+
+    def idle(self) -> bool:
+        return not self.pending and not self.streams
+
 
 def _strip_padding(flags: int, payload: bytes) -> bytes:
     if not flags & PADDED:
@@ -686,6 +726,11 @@ class Http2Transport:
         self._selector = selectors.DefaultSelector()
         self._connections: dict[socket.socket, _Connection] = {}
         self._ready: collections.deque[IncomingCall] = collections.deque()
+        self.reader = _ReadBuffer()
+        # the connection whose calls the trainer takes; others are refused while it lives, so a
+        # second client on the port cannot inject steps into the session (docs/protocol.md §1.8)
+        self.session: _Connection | None = None
+        self._next_sweep = 0.0
 
     def start(self) -> None:
         family = socket.AF_INET6 if ":" in self.bind else socket.AF_INET
@@ -704,8 +749,11 @@ class Http2Transport:
 
     # callbacks from connections
     def call_dropped(self, call: IncomingCall, why: str) -> None:
+        """The session's client went away with a call unanswered: the trainer is told
+        (``client_gone``). Another connection's calls never reached the trainer."""
         logger.debug("Call on stream %d dropped: %s", call.stream_id, why)
-        self.client_gone = True
+        if call.connection is self.session:
+            self.client_gone = True
 
     def connection_closed(self, connection: _Connection) -> None:
         if connection.sock in self._connections:
@@ -724,8 +772,51 @@ class Http2Transport:
         if not self.closed:
             self._pump(0.0)
 
+    def refusal(self, connection: _Connection) -> str | None:
+        """Why ``connection`` may not make calls (another live client holds the session), or None."""
+        session = self.session
+        if session is None or session is connection:
+            return None
+        if session.at_eof():
+            session.drop("the connection was closed")
+        if session.closed:
+            self.session = None
+            return None
+        return (f"port {self.port} is held by a live training session with {session.peer}; a second "
+                "simulator cannot join it. Give each simulator its own port (--num-envs, --base-port).")
+
+    def _adopt(self, call: IncomingCall) -> bool:
+        """True if ``call`` belongs to the session (its connection becomes the session if there is
+        none); else the call is refused and its connection closed."""
+        connection = call.connection
+        refusal = self.refusal(connection)
+        if refusal is None:
+            self.session = connection
+            if call.cancelled:  # dropped before the trainer took it: as if dropped after
+                self.client_gone = True
+            return True
+        call.fail(GRPC_FAILED_PRECONDITION, refusal)
+        connection.close_with(NO_ERROR, refusal)
+        return False
+
+    def _sweep(self) -> None:
+        """Close connections that never finished the preface (slow-loris) or sit idle."""
+        now = time.monotonic()
+        if now < self._next_sweep:
+            return
+        self._next_sweep = now + 1.0
+        for connection in list(self._connections.values()):
+            if connection is self.session:
+                continue
+            if not connection.settings_seen and now - connection.opened_at > PREFACE_TIMEOUT_S:
+                connection.close_with(PROTOCOL_ERROR, f"no HTTP/2 preface within {PREFACE_TIMEOUT_S:.0f} s")
+            elif connection.idle() and now - connection.active_at > IDLE_TIMEOUT_S:
+                connection.close_with(NO_ERROR, f"idle for {IDLE_TIMEOUT_S:.0f} s")
+
     def _pump(self, timeout: float) -> bool:
         """One select round: accept, read, collect calls. False if nothing was ready."""
+        if self._connections:
+            self._sweep()
         events = self._selector.select(timeout)
         for key, _ in events:
             if key.fileobj is self._listener:
@@ -757,7 +848,11 @@ class Http2Transport:
                 if not self._pump(max(remaining, 0.0)) and remaining <= 0:
                     return None
             self.pace.arrived(polled)
-        return self._ready.popleft() if self._ready else None
+        while self._ready:
+            call = self._ready.popleft()
+            if self._adopt(call):
+                return call
+        return None
 
     def _call_ready(self) -> bool:
         """Read what the sockets hold; True once a call is complete (or waiting is pointless)."""
@@ -771,6 +866,15 @@ class Http2Transport:
             sock, _ = self._listener.accept()
         except (BlockingIOError, OSError):
             return
+        if len(self._connections) >= MAX_CONNECTIONS:
+            idle = [c for c in self._connections.values() if c is not self.session and c.idle()]
+            if not idle:
+                logger.warning("Refused a connection from %s: %d connections are open already",
+                               _peer_name(sock), MAX_CONNECTIONS)
+                sock.close()
+                return
+            min(idle, key=lambda c: c.active_at).close_with(
+                NO_ERROR, f"idle, and {MAX_CONNECTIONS} connections are open (the most this server keeps)")
         connection = _Connection(sock, self)
         if not connection.closed:
             self._connections[sock] = connection

@@ -299,7 +299,7 @@ class Decoded:
     done: np.ndarray  # bool [n]
     max_step: np.ndarray  # bool [n]
     obs: list[np.ndarray]  # float32 [n, *shape] per observation
-    mask: np.ndarray  # bool [n, mask_width]; rows whose mask length differs are all False
+    mask: np.ndarray  # bool [n, mask_width]; rows without a mask are all False
 
 
 _LAYOUTS: dict[tuple, list[_Checked]] = {}
@@ -377,6 +377,8 @@ def decode(key: str, data: bytes, shapes: list[tuple[int, ...]], mask_width: int
                 shape != want or count != size
                 for (shape, _, count), want, size in zip(layout.obs, shapes, sizes)):
             return None  # the per-agent parse reports the mismatch
+        if layout.mask is not None and layout.mask[1] not in (0, mask_width):
+            return None  # a mask of the wrong length: the per-agent parse reports it too
     out = Decoded(
         reward=np.zeros(n, np.float32), group_reward=np.zeros(n, np.float32),
         agent_id=np.zeros(n, np.int64), group_id=np.zeros(n, np.int32),

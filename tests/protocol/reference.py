@@ -50,10 +50,25 @@ def observation_value(obs: observation_pb2.ObservationProto) -> np.ndarray:
     return np.array(list(obs.float_data.data), dtype=np.float32).reshape(shape)
 
 
+def mask_fault(infos: Sequence, branches: Sequence[int]) -> bool:
+    """True if a deciding agent's action mask is refused: neither empty nor one entry per
+    option, or masking every option of a branch (docs/protocol.md §3.1)."""
+    total = sum(branches)
+    bounds = np.cumsum([0, *branches])
+    for info in infos:
+        if info.done or not len(info.action_mask):
+            continue
+        if len(info.action_mask) != total:
+            return True
+        if any(all(info.action_mask[bounds[i]:bounds[i + 1]]) for i in range(len(branches))):
+            return True
+    return False
+
+
 def read_agents(infos: Sequence, branches: Sequence[int]) -> dict:
     """Agent infos → {"decision": [...], "terminal": [...]}: one dict per agent, in message order,
-    with the fields DecisionSteps / TerminalSteps carry (a mask whose length is not the sum of
-    the branch sizes masks nothing)."""
+    with the fields DecisionSteps / TerminalSteps carry (an empty mask masks nothing; a finished
+    agent's mask is not read; ``mask_fault`` says which messages are refused)."""
     total = sum(branches)
     out: dict = {"decision": [], "terminal": []}
     for info in infos:

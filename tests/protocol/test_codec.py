@@ -26,7 +26,7 @@ from protos.types import (
 )
 from protos.versions import all_true_capabilities
 from tests.protocol import reference
-from tests.protocol.conftest import agent_info, brain_params, png_bytes
+from tests.protocol.conftest import Message, agent_info, brain_params, png_bytes
 from trainer.errors import UnityVersionError
 from trainer.protocol import codec
 from trainer.protocol.png import split_concatenated_pngs
@@ -135,19 +135,35 @@ def test_nan_or_inf_is_a_protocol_error_naming_behavior_field_and_agent(kwargs, 
 
 
 # ------------------------------------------------------------------ action masks
-def test_action_masks_split_per_branch_true_means_masked_and_bad_lengths_ignored():
+def test_action_masks_split_per_branch_true_means_masked():
     infos = [
         agent_info(1, obs=[[0]], mask=[False, True, True, False, False]),
-        agent_info(2, obs=[[0]], mask=[True, True], done=True),  # terminal: not in the masks
-        agent_info(3, obs=[[0]], mask=[True, False]),  # wrong length: ignored → nothing masked
+        agent_info(2, obs=[[0]], mask=[True, True], done=True),  # terminal: its mask is never used
         agent_info(4, obs=[[0]]),  # empty: nothing masked
         agent_info(5, obs=[[0]], mask=[False, False, False, True, True]),
     ]
     decision, _ = codec.decode_rl_output(output_with({"D": infos}, [brain_params("D", 0, (2, 3))]), {}).steps["D"]
     branch0, branch1 = decision.action_mask
-    np.testing.assert_array_equal(branch0, [[False, True], [False, False], [False, False], [False, False]])
-    np.testing.assert_array_equal(branch1, [[True, False, False], [False, False, False], [False, False, False], [False, True, True]])
+    np.testing.assert_array_equal(branch0, [[False, True], [False, False], [False, False]])
+    np.testing.assert_array_equal(branch1, [[True, False, False], [False, False, False], [False, True, True]])
     assert branch0.dtype == bool
+
+
+@pytest.mark.parametrize("agents", [1, 70])  # the protobuf path and the records path
+@pytest.mark.parametrize("mask, fault", [
+    ([True, False], "action mask of 2 entries; its discrete branches have 5 options"),
+    ([False] * 6, "action mask of 6 entries"),
+    ([True, True, False, False, False], "masked every action of discrete branch 0 (size 2)"),
+    ([False, False, True, True, True], "masked every action of discrete branch 1 (size 3)"),
+])
+def test_a_mask_of_the_wrong_length_or_masking_a_whole_branch_is_refused_naming_the_agent(agents, mask, fault):
+    infos = [agent_info(i, obs=[[0.5]]) for i in range(agents - 1)] + [agent_info(99, obs=[[0.5]], mask=mask)]
+    message = Message()
+    message.header.status = 200
+    message.unity_output.CopyFrom(output_with({"D": infos}, [brain_params("D", 0, (2, 3))]))
+    with pytest.raises(ProtocolError, match=r"Agent id 99 .*" if "masked every" not in fault else "Agent id 99") as error:
+        codec.decode_message(message.SerializeToString(), {})
+    assert fault in str(error.value)
 
 
 # ------------------------------------------------------------------ behaviors, specs
@@ -407,7 +423,7 @@ def test_a_few_agents_decode_to_their_hand_written_values():
                          ObservationSpec((2,), (P.NONE,), ObservationType.DEFAULT, "b")), ActionSpec(1, (2, 3)))
     infos = [agent_info(7, obs=[[1, 2, 3], [4, 5]], reward=0.5, mask=[False, True, True, False, False]),
              agent_info(-3, obs=[[0.25, 0, -1], [9, 8]], reward=-1.5, group_id=4, group_reward=2.0),
-             agent_info(2**31 - 1, obs=[[7, 7, 7], [6, 6]], mask=[True, True])]  # wrong width: nothing masked
+             agent_info(2**31 - 1, obs=[[7, 7, 7], [6, 6]])]  # no mask: nothing masked
     decision, terminal = codec.steps_from_agent_infos("B", infos, spec)
     assert decision.agent_id.tolist() == [7, -3, 2**31 - 1] and decision.reward.tolist() == [0.5, -1.5, 0.0]
     assert decision.obs[0].tolist() == [[1, 2, 3], [0.25, 0, -1], [7, 7, 7]]

@@ -2,7 +2,8 @@
 
 * decoding (``codec.decode_message``): messages built with protobuf's classes, several
   behaviors, vector (1-D), entity (2-D) and image (3-D, float or PNG) observations, action
-  masks of several branches (right or wrong width), done / interrupted agents, group ids and
+  masks of several branches (right or wrong width, a branch all masked: both paths refuse
+  those of deciding agents), done / interrupted agents, group ids and
   rewards, empty lists, 0..70 agents (around the records path's threshold, which is also drawn
   lower so small lists take it) -> every DecisionSteps / TerminalSteps field equals what
   ``reference.read_agents`` reads attribute by attribute;
@@ -18,6 +19,7 @@ import contextlib
 import io
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -30,6 +32,7 @@ from protos.communicator_objects import (
     unity_message_pb2,
     unity_rl_output_pb2,
 )
+from protos.errors import ProtocolError
 from protos.types import ActionSpec, ActionTuple, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from tests.protocol import reference
 from trainer.protocol import codec
@@ -101,8 +104,14 @@ def behaviors(draw):
         info.id, info.group_id = draw(INT32), draw(st.one_of(st.just(0), INT32))
         info.done = draw(st.booleans())
         info.max_step_reached = info.done and draw(st.booleans())
-        mask_width = draw(st.sampled_from([width, width, 0, width + 1])) if width else 0
-        info.action_mask.extend(draw(st.lists(st.booleans(), min_size=mask_width, max_size=mask_width)))
+        mask_width = draw(st.sampled_from([width, width, width, 0, width + 1])) if width else 0
+        mask = draw(st.lists(st.booleans(), min_size=mask_width, max_size=mask_width))
+        if mask_width == width and draw(st.sampled_from([True, True, True, False])):
+            start = 0  # usually one option of each branch stays allowed (else the message is refused)
+            for size in spec.action_spec.discrete_branches:
+                mask[start + draw(st.integers(0, size - 1))] = False
+                start += size
+        info.action_mask.extend(mask)
         for obs_spec, png in zip(spec.observation_specs, pngs):
             obs = info.observations.add()
             obs.shape.extend(obs_spec.shape)
@@ -141,6 +150,12 @@ def test_decoding_equals_protobufs_fields(scene, side_channel, min_rows):
         message.unity_output.rl_initialization_output.brain_parameters.append(brain_parameters(name, spec.action_spec))
     payload = message.SerializeToString()
     specs = {name: spec for name, (spec, _) in scene.items()}
+    if any(reference.mask_fault(infos, spec.action_spec.discrete_branches) for spec, infos in scene.values()):
+        with patched(records, "MIN_ROWS", min_rows):  # both paths refuse it
+            for known in ({}, specs):
+                with pytest.raises(ProtocolError, match="action mask of|masked every action"):
+                    codec.decode_message(payload, known)
+        return
     with patched(records, "MIN_ROWS", min_rows):
         first = codec.decode_message(payload, {}).result  # specs from brain_parameters + first agents
         later = codec.decode_message(payload, specs).result  # every behavior known

@@ -55,6 +55,14 @@ def assert_same_steps(a, b):
 SPEC = BehaviorSpec((vec(3, "pos"), vec(2, "vel")), ActionSpec(2, (3, 2)))
 
 
+def allowing_an_option_per_branch(mask: np.ndarray, rng) -> list[bool]:
+    """SPEC's branches (3, 2): a mask that masks a whole branch is refused (test_codec.py)."""
+    for start, end in ((0, 3), (3, 5)):
+        if mask[start:end].all():
+            mask[start + int(rng.integers(0, end - start))] = False
+    return mask.tolist()
+
+
 def varied_infos(n: int, seed: int):
     """Every field and every varint length the wire can carry, in a realistic mix."""
     rng = np.random.default_rng(seed)
@@ -67,7 +75,7 @@ def varied_infos(n: int, seed: int):
             obs=[rng.normal(size=3).astype(np.float32).tolist(), rng.normal(size=2).astype(np.float32).tolist()],
             reward=float(np.float32(rng.normal())) if rng.random() < 0.7 else 0.0,
             done=bool(rng.random() < 0.2), max_step=bool(rng.random() < 0.1),
-            mask=(rng.random(5) < 0.3).tolist() if masked else (rng.random(2) < 0.5).tolist(),
+            mask=allowing_an_option_per_branch(rng.random(5) < 0.3, rng) if masked else [],
             group_id=int(rng.integers(0, 3)) * int(rng.integers(0, 200)),
             group_reward=float(np.float32(rng.normal())) if rng.random() < 0.3 else 0.0,
         ))

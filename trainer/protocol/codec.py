@@ -63,6 +63,7 @@ SUPPORTED_DIMENSION_PROPERTIES = frozenset(
         (_P.VARIABLE_SIZE, _P.NONE),
     }
 )
+_DIMENSION_PROPERTY_VALUES = frozenset(int(p) for p in _P)
 _VERSION_RE = re.compile(r"(\d+)\.(\d+)(?:\.(\d+))?(?:[ab]\d+)?")  # StrictVersion's grammar
 
 
@@ -94,23 +95,85 @@ def check_communication_version(unity_version: str) -> None:
 
 
 # --------------------------------------------------------------------------- behavior specs
+# Bounds on what a simulator may declare, checked before anything is allocated for it
+# (docs/protocol.md §3.2, "Limits"). Real games declare tens of actions and observations of at
+# most a few hundred thousand floats; these leave a wide margin and keep the trainer's memory
+# for one behavior within a budget: the policy's output layer is at most
+# (MAX_CONTINUOUS_ACTIONS + MAX_DISCRETE_OPTIONS) x hidden_units floats (36 MiB at 512 units),
+# one agent's action mask MAX_DISCRETE_OPTIONS bools, and one decoded observation
+# MAX_OBSERVATION_FLOATS floats (64 MiB).
+MAX_CONTINUOUS_ACTIONS = 2048
+MAX_DISCRETE_BRANCHES = 1024
+MAX_DISCRETE_OPTIONS = 16384  # the sum of the branch sizes
+MAX_OBSERVATION_FLOATS = 1 << 24
+# decoded PNG observations of one message, before the images are decoded (a PNG of a few bytes
+# can declare any size: it is checked against this and the sensor shape first)
+MAX_DECODED_IMAGE_BYTES = 1 << 30
+
+
 def behavior_spec_from_proto(brain_params, agent_info) -> BehaviorSpec:
-    """BrainParametersProto + the behavior's first AgentInfoProto → BehaviorSpec (docs/protocol.md §3.2)."""
+    """BrainParametersProto + the behavior's first AgentInfoProto → BehaviorSpec (docs/protocol.md §3.2).
+
+    Raises ProtocolError for a spec the trainer cannot train, or one beyond the limits above."""
+    name = brain_params.brain_name
+    if not agent_info.observations:
+        raise ProtocolError(
+            f"Behavior {name!r} sent an agent without any observation; a policy needs at least one "
+            "sensor. Add a sensor (or vector observations) to its agents in the Unity scene."
+        )
     observation_specs = []
     for index, obs in enumerate(agent_info.observations):
         shape = tuple(obs.shape)
-        props = tuple(_P(p) for p in obs.dimension_properties) or (_P.UNSPECIFIED,) * len(shape)
+        known = all(p in _DIMENSION_PROPERTY_VALUES for p in obs.dimension_properties)
+        props = tuple(_P(p) if known else p for p in obs.dimension_properties) or (_P.UNSPECIFIED,) * len(shape)
         if len(props) != len(shape) or props not in SUPPORTED_DIMENSION_PROPERTIES:
             raise ProtocolError(
                 f"Unsupported sensor {obs.name!r} (observation {index}) of behavior "
                 f"{brain_params.brain_name!r}: shape {shape} with dimension properties "
-                f"{[p.name for p in props]}. Supported are vectors (rank 1), CHW images (rank 3) and "
+                f"{[getattr(p, 'name', p) for p in props]}. Supported are vectors (rank 1), CHW images (rank 3) and "
                 "variable-length entity lists (VARIABLE_SIZE, NONE); change the sensor in the scene."
             )
-        observation_specs.append(
-            ObservationSpec(shape, props, ObservationType(obs.observation_type), obs.name)
+        if any(d <= 0 for d in shape) or math.prod(shape) > MAX_OBSERVATION_FLOATS:
+            raise ProtocolError(
+                f"Sensor {obs.name!r} (observation {index}) of behavior {name!r} declares shape "
+                f"{shape}; each dimension must be positive and an observation at most "
+                f"{MAX_OBSERVATION_FLOATS} floats. Check the sensor's size in the Unity scene."
+            )
+        try:
+            observation_type = ObservationType(obs.observation_type)
+        except ValueError:
+            raise ProtocolError(
+                f"Sensor {obs.name!r} (observation {index}) of behavior {name!r} has the unknown "
+                f"observation type {obs.observation_type}; rebuild the environment with the "
+                "ML-Agents package of Release 22."
+            ) from None
+        observation_specs.append(ObservationSpec(shape, props, observation_type, obs.name))
+    return BehaviorSpec(tuple(observation_specs), _checked_action_spec(name, _action_spec_from_proto(brain_params)))
+
+
+def _checked_action_spec(name: str, spec: ActionSpec) -> ActionSpec:
+    """``spec`` if the trainer can build a policy for it, else ProtocolError (limits above)."""
+    branches = spec.discrete_branches
+    fault = None
+    if spec.continuous_size < 0 or spec.continuous_size > MAX_CONTINUOUS_ACTIONS:
+        fault = f"{spec.continuous_size} continuous actions (at most {MAX_CONTINUOUS_ACTIONS})"
+    elif len(branches) > MAX_DISCRETE_BRANCHES:
+        fault = f"{len(branches)} discrete branches (at most {MAX_DISCRETE_BRANCHES})"
+    elif any(size <= 0 for size in branches):
+        fault = f"discrete branch sizes {_brief(branches)}: every branch needs at least one option"
+    elif sum(branches) > MAX_DISCRETE_OPTIONS:
+        fault = f"{sum(branches)} discrete options over all branches (at most {MAX_DISCRETE_OPTIONS})"
+    if fault is not None:
+        raise ProtocolError(
+            f"Behavior {name!r} declares {fault}; the trainer cannot build a policy for it. Fix the "
+            "Behavior Parameters (action specification) of its agents in the Unity scene."
         )
-    return BehaviorSpec(tuple(observation_specs), _action_spec_from_proto(brain_params))
+    return spec
+
+
+def _brief(values: Sequence[int]) -> str:
+    shown = ", ".join(map(str, values[:8]))
+    return f"[{shown}{', ...' if len(values) > 8 else ''}]"
 
 
 def _action_spec_from_proto(brain_params) -> ActionSpec:
@@ -192,6 +255,15 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec],
             new_specs[name] = behavior_spec_from_proto(brain_params, first)
         elif name in agent_infos and len(agent_infos[name].value) > 0:
             new_specs[name] = behavior_spec_from_proto(brain_params, agent_infos[name].value[0])
+    for name, spec in new_specs.items():
+        known = known_specs.get(name)
+        if known is not None and _network_shape(known) != _network_shape(spec):
+            raise ProtocolError(
+                f"Behavior {name!r} changed its specification mid-run, from {_describe_spec(known)} "
+                f"to {_describe_spec(spec)}; the trainer's networks are built for the first one. "
+                "Keep each behavior's sensors and actions fixed during a run, or give the new "
+                "setup its own behavior name."
+            )
     specs = {**known_specs, **new_specs}
     for name in [*agent_infos, *lists]:
         if name not in specs and (name in lists or len(agent_infos[name].value) > 0):
@@ -208,6 +280,20 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec],
         else:
             steps[name] = (DecisionSteps.empty(spec), TerminalSteps.empty(spec))
     return StepResult(specs=new_specs, steps=steps, side_channel=output.rl_output.side_channel)
+
+
+def _network_shape(spec: BehaviorSpec) -> tuple:
+    """What the trainer's networks are built from: sensor names may change, and the supported
+    dimension properties of one rank are all read the same way."""
+    return (tuple((o.shape, o.observation_type) for o in spec.observation_specs),
+            spec.action_spec)
+
+
+def _describe_spec(spec: BehaviorSpec) -> str:
+    shapes = ", ".join(str(o.shape) for o in spec.observation_specs)
+    action = spec.action_spec
+    return (f"observations {shapes} with {action.continuous_size} continuous actions and discrete "
+            f"branches {_brief(action.discrete_branches)}")
 
 
 def decode_agent_list(behavior_name: str, data: bytes, cut, spec: BehaviorSpec):
@@ -281,7 +367,7 @@ def _agent_by_agent(behavior_name: str, agent_infos: Sequence, spec: BehaviorSpe
         max_step=np.array(max_step, dtype=bool),
         obs=[_stack_observation(behavior_name, index, obs_spec, all_obs, ids)
              for index, obs_spec in enumerate(spec.observation_specs)],
-        mask=_mask_matrix(agent_infos, int(sum(spec.action_spec.discrete_branches))),
+        mask=_mask_matrix(behavior_name, agent_infos, int(sum(spec.action_spec.discrete_branches)), ids, done),
     )
 
 
@@ -298,6 +384,8 @@ def _no_agents(spec: BehaviorSpec) -> records.Decoded:
 def _split_steps(fields: records.Decoded, spec: BehaviorSpec) -> tuple[DecisionSteps, TerminalSteps]:
     branches = spec.action_spec.discrete_branches
     done = fields.done
+    if branches and fields.mask.any():
+        _require_an_option_per_branch(fields, branches)
     if not done.any():  # the common message: nobody finished, no boolean indexing needed
         decision = DecisionSteps(
             obs=fields.obs,
@@ -409,6 +497,12 @@ def _stack_visual(
     behavior: str, index: int, shape: tuple[int, ...], sensor_obs: list, agent_id: np.ndarray
 ) -> np.ndarray:
     """Rank-3 observations (PNG or float) → float32 [n, C, H, W]."""
+    if 4 * len(sensor_obs) * math.prod(shape) > MAX_DECODED_IMAGE_BYTES:
+        raise ProtocolError(
+            f"Behavior {behavior!r} sent {len(sensor_obs)} image observations of shape {shape} in one "
+            f"message, more than the trainer decodes at once ({MAX_DECODED_IMAGE_BYTES >> 20} MiB as "
+            "floats); lower the camera resolution or the number of agents per simulator."
+        )
     out = np.empty((len(sensor_obs), *shape), dtype=np.float32)
     for row, obs in enumerate(sensor_obs):
         if tuple(obs.shape) != shape:
@@ -425,14 +519,44 @@ def _stack_visual(
     return out
 
 
-def _mask_matrix(agent_infos: Sequence, total: int) -> np.ndarray:
-    """bool [n, total], True = masked. A mask whose length is not ``total`` (the sum of the
-    branch sizes) is ignored: nothing masked for that agent."""
-    if total == 0:
-        return np.zeros((len(agent_infos), 0), dtype=bool)
+def _mask_matrix(behavior: str, agent_infos: Sequence, total: int, agent_id: np.ndarray,
+                 done: Sequence[bool]) -> np.ndarray:
+    """bool [n, total], True = masked. An empty mask masks nothing; a deciding agent's mask of
+    any other length than ``total`` (the sum of the branch sizes) is a ProtocolError naming the
+    agent (a finished agent's mask is never used: it masks nothing)."""
+    masks = list(map(_ACTION_MASK, agent_infos))
     nothing = [False] * total
-    rows = [list(mask) if len(mask) == total else nothing for mask in map(_ACTION_MASK, agent_infos)]
+    rows = []
+    for row, mask in enumerate(masks):
+        if len(mask) == total:
+            rows.append(list(mask))
+        elif not mask or done[row]:
+            rows.append(nothing)
+        else:
+            _bad_mask_length(behavior, agent_id[row], len(mask), total)
     return np.array(rows, dtype=bool).reshape(len(rows), total)
+
+
+def _bad_mask_length(behavior: str, agent_id, length: int, total: int) -> None:
+    raise ProtocolError(
+        f"Agent id {int(agent_id)} of behavior {behavior!r} sent an action mask of {length} entries; "
+        f"its discrete branches have {total} options in all. Mask through the ML-Agents "
+        "WriteDiscreteActionMask API, one entry per option of each branch."
+    )
+
+
+def _require_an_option_per_branch(fields: records.Decoded, branches: tuple[int, ...]) -> None:
+    """ProtocolError if a deciding agent masks every option of a branch (nothing to choose)."""
+    deciding = ~fields.done
+    for branch, (start, end) in enumerate(_branch_bounds(branches)):
+        all_masked = fields.mask[:, start:end].all(axis=1) & deciding
+        if all_masked.any():
+            agent = int(fields.agent_id[int(np.argmax(all_masked))])
+            raise ProtocolError(
+                f"Agent id {agent} masked every action of discrete branch {branch} (size "
+                f"{end - start}); at least one option per branch must stay allowed. Fix the agent's "
+                "WriteDiscreteActionMask code in the Unity project."
+            )
 
 
 def _split_branches(matrix: np.ndarray, branches: tuple[int, ...]) -> list[np.ndarray] | None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import struct
+import zlib
 from typing import Sequence
 
 import numpy as np
@@ -54,15 +55,42 @@ def _end_of_png(data: bytes, start: int) -> int:
     )
 
 
-def _png_to_chw(png: bytes) -> np.ndarray:
-    """Decode one PNG file to float32 [channels, H, W] in [0, 1]."""
-    with Image.open(io.BytesIO(png)) as image:
-        if image.mode not in ("L", "RGB", "RGBA"):
-            image = image.convert("RGB")
-        pixels = np.asarray(image, dtype=np.float32) / 255.0
+def _png_to_chw(png: bytes, height: int, width: int) -> np.ndarray:
+    """Decode one PNG file to float32 [channels, H, W] in [0, 1].
+
+    Its IHDR chunk must declare ``height`` x ``width`` (the sensor's shape) before anything is
+    decompressed: a PNG of a few hundred bytes can declare 20000 x 20000 pixels (1.2 GB once
+    decoded). Anything Pillow cannot decode is a ProtocolError."""
+    size = _ihdr_size(png)
+    if size != (width, height):
+        raise ProtocolError(
+            f"A PNG observation declares {size[0]}x{size[1]} pixels but the sensor's shape needs "
+            f"{width}x{height}; check the camera/render-texture sensor settings in the Unity scene."
+        )
+    try:
+        with Image.open(io.BytesIO(png), formats=("PNG",)) as image:
+            if image.mode not in ("L", "RGB", "RGBA"):
+                image = image.convert("RGB")
+            pixels = np.asarray(image, dtype=np.float32) / 255.0
+    except (OSError, SyntaxError, ValueError, EOFError, zlib.error, Image.DecompressionBombError) as error:
+        raise ProtocolError(
+            f"A PNG observation could not be decoded ({type(error).__name__}: {error}); the simulator "
+            "sent garbled compressed_data."
+        ) from None
     if pixels.ndim == 2:
         return pixels[np.newaxis]
     return np.moveaxis(pixels, -1, 0)
+
+
+def _ihdr_size(png: bytes) -> tuple[int, int]:
+    """(width, height) from the IHDR chunk, which must come first (PNG specification 5.6)."""
+    offset = len(PNG_SIGNATURE)
+    if len(png) < offset + 8 + 13 or png[offset + 4:offset + 8] != b"IHDR":
+        raise ProtocolError(
+            "A PNG observation does not begin with an IHDR chunk; the simulator sent garbled "
+            "compressed_data."
+        )
+    return struct.unpack_from(">II", png, offset + 8)
 
 
 def _apply_channel_mapping(channels: np.ndarray, mapping: Sequence[int]) -> np.ndarray:
@@ -86,7 +114,12 @@ def decode_png_observation(
     data: bytes, shape: Sequence[int], mapping: Sequence[int] = ()
 ) -> np.ndarray:
     """Decode concatenated PNGs to float32 [C, H, W] equal to ``shape``, else ProtocolError."""
-    images = [_png_to_chw(png) for png in split_concatenated_pngs(data)]
+    images = [_png_to_chw(png, shape[1], shape[2]) for png in split_concatenated_pngs(data)]
+    if sum(len(image) for image in images) > 3 * max(shape[0], len(mapping)):
+        raise ProtocolError(  # more channels than the sensor can use: not what Unity sends
+            f"A PNG observation holds {len(images)} images for a sensor of shape {tuple(shape)}; the "
+            "simulator sent garbled compressed_data."
+        )
     if len(mapping) > 0:
         result = _apply_channel_mapping(np.concatenate(images, axis=0), mapping)
     elif shape[0] == 1:

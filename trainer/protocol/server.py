@@ -216,13 +216,16 @@ class UnityEndpoint:
         describe: str | Callable[[], str] = "",
         transport: str = "http2",
         spin_wait: float = 0.0,
+        editor: bool = False,
     ) -> None:
         """``describe``: names the simulator in errors (a callable is asked when the error
         happens, so it can say how the process ended). ``spin_wait`` (s): poll for the simulator's
         next call up to this long past when it is due instead of sleeping through it
         (protos/pacing.py; HTTP/2 transport only). ``transport``: one of TRANSPORTS (the run's
-        MLAGENTS_LIKE_TRANSPORT, trainer.config.env_vars)."""
+        MLAGENTS_LIKE_TRANSPORT, trainer.config.env_vars). ``editor``: the Unity Editor connects
+        (no --env), which changes the advice when the port is taken."""
         self.port = port
+        self.editor = editor
         self.bind = bind
         self.timeout_wait = float(timeout_wait)
         self.is_alive = is_alive
@@ -266,6 +269,13 @@ class UnityEndpoint:
             probe.close()
 
     def _port_in_use_error(self) -> PortInUseError:
+        if self.editor:  # the Editor always connects to its fixed port: --base-port cannot move it
+            return PortInUseError(
+                f"Port {self.port} on {self.bind} is already in use; the Unity Editor always connects "
+                f"to port {self.port}, so --base-port cannot help. Stop the process holding it (often "
+                f"another training run waiting for the Editor; `ss -ltnp 'sport = :{self.port}'` or "
+                f"`lsof -i :{self.port}` names it), or train a built player with --env and --base-port."
+            )
         return PortInUseError(
             f"Port {self.port} on {self.bind} is already in use{self._for()}, maybe by another "
             "training run or a simulator that did not exit. Stop it, or pick other ports with "
