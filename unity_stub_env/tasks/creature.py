@@ -320,8 +320,7 @@ class CreatureTask(Task):
             qpos = self.rest_qpos.copy()
             qpos[:3] += self.centre[i] + [0.0, 0.0, h[near].max() + SPAWN_CLEARANCE]
             qpos[3:] = [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
-            # turning about the root's proximal point moves the body's rest offsets too: the free
-            # joint's frame is the root body, so this yaw turns the whole creature about that point
+            # the yaw turns the whole creature about its root bone's proximal point (the free joint)
             data.qpos[self.root_qpos[i]] = qpos
         data.qpos[self.hinge_qpos[agents]] = 0.0
         data.qvel[self.root_dof[agents]] = 0.0
