@@ -32,7 +32,7 @@ from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, GaugeWriter, Stats
 from trainer.artifacts.tensorboard import TensorboardWriter
 from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
-from trainer.config.env_params import ConstantSampler
+from trainer.config.env_params import ConstantSampler, HmmSampler, hmm_model, hmm_sequences
 from trainer.config.env_vars import EnvVars
 from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
@@ -136,6 +136,12 @@ def warn_if_not_loopback(bind: str, ports: str) -> None:
 def environment_parameter_messages(manager: EnvironmentParameterManager) -> list[tuple]:
     msgs = []
     for key, sampler in manager.current_samplers().items():
+        if isinstance(sampler, HmmSampler):
+            codes = hmm_sequences(sampler)
+            num_labels = hmm_model(sampler).num_labels
+            msgs += [(sc.ENVIRONMENT_PARAMETERS_CHANNEL_ID, payload)
+                     for payload in sc.encode_env_sequences(key, codes, num_labels)]
+            continue
         if isinstance(sampler, ConstantSampler):
             payload = sc.encode_env_float(key, sampler.value)
         elif sampler.sampler_type == "uniform":

@@ -6,6 +6,8 @@
     unity-stub-env --list
     unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
                    [--evaluate-option KEY=VALUE]
+    unity-stub-env hmm train CORPUS -o MODEL [--states N --restarts R --method fast|baum-welch --seed S]
+    unity-stub-env hmm sample MODEL -n N --length L [--seed S]      (see unity_stub_env.hmm)
     unity-stub-env creature --kind quadruped|biped|lsystem --seed S [--mjcf OUT.xml]
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
@@ -100,6 +102,10 @@ def _configure_logging(log_file: str | None) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "hmm":  # the HMM tools: unity-stub-env hmm train|sample ...
+        from unity_stub_env.hmm import main as hmm_main
+
+        return hmm_main(argv[1:])
     if argv and argv[0] == "creature":  # a generated creature's MJCF (unity_stub_env.creatures)
         from unity_stub_env.creatures import main as creature_main
 

@@ -21,7 +21,7 @@ SCHEDULES = ("linear", "constant")
 ENCODER_TYPES = ("simple", "nature_cnn", "resnet", "match3", "fully_connected")
 CONDITIONING_TYPES = ("hyper", "none")
 TRAINER_TYPES = ("ppo", "sac", "poca")
-TRAINABLE_TRAINER_TYPES = ("ppo",)
+TRAINABLE_TRAINER_TYPES = ("ppo", "sac")
 DEFAULT_CHECKPOINT_NAME = "checkpoint.pt"
 
 
@@ -38,6 +38,32 @@ class PPOSettings:
     learning_rate_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
     beta_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
     epsilon_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
+
+
+@dataclass(frozen=True)
+class SACSettings:
+    """``trainer_type: sac`` hyperparameters (docs/configuration.md, "SAC"). ``steps_per_update`` and
+    ``reward_signal_steps_per_update`` are agent steps per gradient step (floats allowed);
+    ``reward_signal_steps_per_update`` None means: the same as ``steps_per_update``."""
+
+    batch_size: int = 128
+    buffer_size: int = 50000
+    learning_rate: float = 3.0e-4
+    learning_rate_schedule: str = field(default="constant", metadata={"choices": SCHEDULES})
+    buffer_init_steps: int = 0
+    tau: float = 0.005
+    steps_per_update: float = 1.0
+    save_replay_buffer: bool = False
+    init_entcoef: float = 1.0
+    reward_signal_steps_per_update: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.reward_signal_steps_per_update is None:
+            object.__setattr__(self, "reward_signal_steps_per_update", float(self.steps_per_update))
+
+
+#: trainer_type -> its hyperparameters class (poca is refused before its block is read)
+HYPERPARAMETER_CLASSES: dict[str, type] = {"ppo": PPOSettings, "sac": SACSettings}
 
 
 @dataclass(frozen=True)
@@ -130,7 +156,7 @@ def _default_reward_signals() -> dict[str, RewardSignalSettings]:
 @dataclass(frozen=True)
 class TrainerSettings:
     trainer_type: str = "ppo"
-    hyperparameters: PPOSettings = field(default_factory=PPOSettings)
+    hyperparameters: PPOSettings | SACSettings = field(default_factory=PPOSettings)
     checkpoint_interval: int = 500000
     network_settings: NetworkSettings = field(default_factory=NetworkSettings)
     reward_signals: dict[str, RewardSignalSettings] = field(default_factory=_default_reward_signals)
