@@ -9,6 +9,7 @@
                    [--evaluate-option KEY=VALUE]
     unity-stub-env hmm train CORPUS -o MODEL [--states N --restarts R --method fast|baum-welch --seed S]
     unity-stub-env hmm sample MODEL -n N --length L [--seed S]      (see unity_stub_env.hmm)
+    unity-stub-env creature --kind quadruped|biped|lsystem --seed S [--mjcf OUT.xml]
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
@@ -111,6 +112,10 @@ def main(argv: list[str] | None = None) -> int:
         from unity_stub_env.hmm import main as hmm_main
 
         return hmm_main(argv[1:])
+    if argv and argv[0] == "creature":  # a generated creature's MJCF (unity_stub_env.creatures)
+        from unity_stub_env.creatures import main as creature_main
+
+        return creature_main(argv[1:])
     args, unknown = build_parser().parse_known_args(_normalise_unity_flags(argv))
     if args.list:
         for task_class in TASKS.values():
