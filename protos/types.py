@@ -148,3 +148,5 @@ class StepResult:
     specs: dict[str, BehaviorSpec] = field(default_factory=dict)  # specs first seen in this message
     steps: dict[str, tuple[DecisionSteps, TerminalSteps]] = field(default_factory=dict)
     side_channel: bytes = b""
+    # behaviors some of whose agents were left out for NaN/Inf: {behavior: trainer.protocol.codec.Dropped}
+    dropped: dict = field(default_factory=dict)
