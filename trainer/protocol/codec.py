@@ -305,12 +305,16 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec],
 def _drop_non_finite(behavior: str, fields: records.Decoded) -> tuple[records.Decoded, Dropped | None]:
     """``fields`` without the agents whose reward, group reward or any observation holds NaN or
     Inf (docs/protocol.md §3.1): they never reach the networks. Also what was dropped, or None."""
-    finite = [np.isfinite(fields.reward), np.isfinite(fields.group_reward)]
-    finite += [np.isfinite(o) for o in fields.obs]
-    if all(f.all() for f in finite):  # the common message: one pass over each array
+    # the common message: NaN and Inf propagate into a Python sum of the rewards (0.3 us for 12
+    # agents, where two numpy checks cost 2 us), then one pass over each observation array
+    if (math.isfinite(sum(fields.reward.tolist()) + sum(fields.group_reward.tolist()))
+            and all(np.isfinite(o).all() for o in fields.obs)):
         return fields, None
+    finite = [np.isfinite(fields.reward), np.isfinite(fields.group_reward)] + [np.isfinite(o) for o in fields.obs]
     n = len(fields.reward)
     ok = np.logical_and.reduce([f.reshape(n, -1).all(axis=1) for f in finite])
+    if ok.all():  # the rewards' sum overflowed, nothing else
+        return fields, None
     deciding = ~fields.done
     bad = int(np.argmin(ok))
     if behavior not in _WARNED_NON_FINITE:
@@ -538,8 +542,13 @@ def _mask_matrix(behavior: str, agent_infos: Sequence, total: int, agent_id: np.
                  done: Sequence[bool]) -> np.ndarray:
     """bool [n, total], True = masked. An empty mask masks nothing; a deciding agent's mask of
     any other length than ``total`` (the sum of the branch sizes) is a ProtocolError naming the
-    agent (a finished agent's mask is never used: it masks nothing)."""
+    agent (a finished agent's mask is never used: it masks nothing). Without discrete actions
+    there is nothing to mask: masks are not read."""
+    if total == 0:
+        return np.zeros((len(agent_infos), 0), dtype=bool)
     masks = list(map(_ACTION_MASK, agent_infos))
+    if not any(map(len, masks)):  # the common case: nobody masks anything
+        return np.zeros((len(masks), total), dtype=bool)
     nothing = [False] * total
     rows = []
     for row, mask in enumerate(masks):
