@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -16,7 +17,8 @@ import torch
 
 from protos.types import BehaviorSpec
 from trainer.artifacts.atomic import atomic_copy
-from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
+from trainer import crash_points
+from trainer.artifacts.checkpoints import CheckpointError, checkpoint_step, load_checkpoint, save_checkpoint
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
 from trainer.errors import UserError
 from trainer.ppo.buffer import Trajectory
@@ -74,6 +76,16 @@ class CheckpointPaths:
         base = os.path.join(self.folder, f"{self.brain}-{step}")
         return base + ".onnx", base + ".pt"
 
+    def steps_on_disk(self) -> dict[int, dict[str, str]]:
+        """{step: {"pt": path, "onnx": path}} of the numbered checkpoint files in the folder."""
+        pattern = re.compile(re.escape(self.brain) + r"-(\d+)\.(pt|onnx)")
+        found: dict[int, dict[str, str]] = {}
+        for name in os.listdir(self.folder) if os.path.isdir(self.folder) else ():
+            match = pattern.fullmatch(name)
+            if match:
+                found.setdefault(int(match.group(1)), {})[match.group(2)] = os.path.join(self.folder, name)
+        return found
+
     @property
     def latest(self) -> str:
         return os.path.join(self.folder, "checkpoint.pt")
@@ -116,7 +128,9 @@ class BehaviorRunner:
                 f"No checkpoint for behavior '{self.brain}' at {path}. Check --run-id / --initialize-from, "
                 "or start a new run without --resume."
             )
-        state = load_checkpoint(path)
+        self._load_state(path, load_checkpoint(path), reset_step)
+
+    def _load_state(self, path: str, state: dict, reset_step: bool) -> None:
         try:
             self.trainer.load_state_dict(state)
         except (KeyError, RuntimeError, ValueError) as err:
@@ -129,6 +143,88 @@ class BehaviorRunner:
         elif "Summaries" in state:
             self.resumed_next_summary = int(state["Summaries"]["next_step"])
         logger.info("Loaded %s for behavior %s at step %d.", path, self.brain, self.trainer.step)
+
+    def resume(self, status: TrainingStatus) -> None:
+        """--resume: load the newest checkpoint that verifies, then tidy the folder for it.
+
+        checkpoint.pt is written last of a checkpoint's files (``save_checkpoint``), so a run
+        killed in between leaves a newer ``<brain>-<step>.pt``: the newest of the two that loads
+        and passes its checksum wins; a damaged file is named in an error line and the next older
+        one is tried (docs/reliability.md)."""
+        candidates = [(step, files["pt"]) for step, files in self.paths.steps_on_disk().items() if "pt" in files]
+        candidates.sort(reverse=True)
+        chosen: tuple[int, str, dict] | None = None
+        failures: list[str] = []
+        if os.path.isfile(self.paths.latest):
+            try:
+                state = load_checkpoint(self.paths.latest)
+                chosen = (checkpoint_step(state), self.paths.latest, state)
+            except CheckpointError as error:
+                logger.error("%s; trying the previous checkpoint.", error.problem)
+                failures.append(self.paths.latest)
+        for step, path in candidates:
+            if chosen is not None and step <= chosen[0]:
+                break
+            try:
+                state = load_checkpoint(path)
+            except CheckpointError as error:
+                logger.error("%s; trying the previous checkpoint.", error.problem)
+                failures.append(path)
+                continue
+            chosen = (checkpoint_step(state), path, state)
+            break
+        if chosen is None:
+            tried = ", ".join(failures) if failures else f"no checkpoint in {self.paths.folder}"
+            raise CheckpointError(
+                f"No usable checkpoint for behavior '{self.brain}' ({tried}). Start a new run with --force, "
+                "or pick another --run-id."
+            )
+        step, path, state = chosen
+        self._load_state(path, state, reset_step=False)
+        self.tidy_after_resume(status)
+
+    def tidy_after_resume(self, status: TrainingStatus) -> None:
+        """Make the folder and training_status.json agree with the step resumed from: numbered
+        files of later steps (a checkpoint the killed run had not finished, or a damaged one) and
+        orphan halves (a .pt without its .onnx or the reverse) are removed, the resumed step's
+        missing .onnx is exported again, and checkpoints beyond keep_checkpoints are deleted
+        (leftover temp files went earlier: ``trainer.run.prepare_run_dir``)."""
+        step = self.trainer.step
+        removed: list[str] = []
+        on_disk = self.paths.steps_on_disk()
+        if step in on_disk and "onnx" not in on_disk[step]:
+            onnx_path, _ = self.paths.step_files(step)
+            self.trainer.export_onnx(onnx_path)
+            on_disk[step]["onnx"] = onnx_path
+        complete: dict[int, dict[str, str]] = {}
+        for s, files in on_disk.items():
+            if s > step or len(files) < 2:
+                for f in files.values():
+                    os.remove(f)
+                    removed.append(f)
+            else:
+                complete[s] = files
+        tracked = {entry.steps: entry for entry in status.checkpoints(self.brain)}
+        entries = []
+        for s in sorted(complete):
+            entry = tracked.get(s)
+            if entry is None:
+                entry = CheckpointEntry(steps=s, file_path=complete[s]["onnx"], reward=None,
+                                        creation_time=os.path.getmtime(complete[s]["pt"]),
+                                        auxillary_file_paths=[complete[s]["pt"]])
+            entries.append(entry)
+        keep = self.settings.keep_checkpoints
+        if keep > 0 and len(entries) > keep:
+            for old in entries[:-keep]:
+                for f in complete[old.steps].values():
+                    os.remove(f)
+                    removed.append(f)
+            entries = entries[-keep:]
+        status.set_checkpoints(self.brain, entries)
+        if removed:
+            logger.info("Removed %d file(s) a previous run left unfinished or beyond keep_checkpoints: %s",
+                        len(removed), ", ".join(os.path.basename(f) for f in removed))
+        self.last_checkpoint_step = step
 
     def schedule_from_step(self) -> None:
         """Next summary and checkpoint after (re)starting at the trainer's step. A resumed run
@@ -165,7 +261,7 @@ class BehaviorRunner:
         if self.done:  # inference, or past max_steps while other behaviors still train
             return {}
         if self.trainer.step + len(traj) >= self.next_checkpoint:
-            self.save_checkpoint(status)
+            self.save_checkpoint(status, summary_follows=self.trainer.step + len(traj) >= self.next_summary)
             while self.next_checkpoint <= self.trainer.step + len(traj):
                 self.next_checkpoint += self.checkpoint_interval
         return self.trainer.process_trajectory(traj)
@@ -175,19 +271,30 @@ class BehaviorRunner:
         self.returns_since_checkpoint.extend(returns)
 
     # ----------------------------------------------------------------------------- files
-    def save_checkpoint(self, status: TrainingStatus, final: bool = False) -> str:
+    def save_checkpoint(self, status: TrainingStatus, final: bool = False, summary_follows: bool = True) -> str:
+        """<brain>-<step>.pt, then its .onnx, then checkpoint.pt (each atomic); the caller writes
+        training_status.json next. A kill between any two leaves the previous checkpoint.pt intact
+        and files that ``tidy_after_resume`` recognises."""
         step = self.trainer.step
         onnx_path, pt_path = self.paths.step_files(step)
         state = self.trainer.state_dict()
         # The first summary a run resumed from this checkpoint writes. The final save comes after
         # the last summary (and a stop's early one): the next is the first not written. A periodic
-        # save comes just before the summary of its period, which this run goes on to write (a run
-        # killed without warning too, unless it dies within the few steps between): the one after.
-        next_summary = self.next_summary if final else self.next_summary + self.settings.summary_freq
+        # save whose trajectory also reaches the next summary comes just before that summary, which
+        # this run goes on to write in the same iteration (a run killed without warning too, unless
+        # it dies in between): the one after. Otherwise (checkpoint_interval not a multiple of
+        # summary_freq) the next summary is still far: a run killed before it must not skip it (the
+        # soak lost one label per kill that way, bench/RESULTS.md).
+        next_summary = self.next_summary
+        if not final and summary_follows:
+            next_summary += self.settings.summary_freq
         state["Summaries"] = {"next_step": torch.tensor(next_summary, dtype=torch.int64)}
         save_checkpoint(pt_path, state)
-        save_checkpoint(self.paths.latest, state)
+        crash_points.reached("checkpoint.pt")
         self.trainer.export_onnx(onnx_path)
+        crash_points.reached("checkpoint.onnx")
+        save_checkpoint(self.paths.latest, state)
+        crash_points.reached("checkpoint.latest")
         logger.info("Exported %s", onnx_path)
         reward = float(np.mean(self.returns_since_checkpoint)) if self.returns_since_checkpoint else None
         self.returns_since_checkpoint = []

@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import os
 import platform
+import signal
 import sys
 
 LOGO = r"""
@@ -104,6 +105,8 @@ def main(argv: list[str] | None = None) -> int:
         from trainer.stop import STOP
 
         STOP.install()
+        if hasattr(signal, "SIGXFSZ"):  # past `ulimit -f` a write fails with EFBIG (one message), no core dump
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         from trainer.run import run_training
 
         return run_training(options, env_vars)

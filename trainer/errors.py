@@ -38,6 +38,11 @@ class UnityVersionError(UserError):
     """The simulator speaks an incompatible communication API version."""
 
 
+class ResultsWriteError(UserError):
+    """A file of the results folder could not be written: permissions, a read-only or full disk,
+    a file size limit. Earlier checkpoints are intact (every write is atomic)."""
+
+
 class UnityCommunicatorStoppedError(Exception):
     """The simulator closed the connection (status != 200). Not an error: training stops cleanly."""
 

@@ -11,10 +11,12 @@ Per iteration (each simulator has just sent its message):
 """
 from __future__ import annotations
 
+import ipaddress
 import logging
 import os
 import re
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -23,6 +25,8 @@ import numpy as np
 
 from protos import side_channels as sc
 from protos.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
+from trainer import crash_points
+from trainer.artifacts.atomic import WRITE_ERRNOS, results_write_error
 from trainer.artifacts.console import ConsoleWriter, ProgressLine
 from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, GaugeWriter, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
@@ -34,8 +38,8 @@ from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
 from trainer.config.support import goal_conditioning_note
 from trainer.curriculum import EnvironmentParameterManager
-from trainer.envs.pool import EnvPool, PoolSettings
-from trainer.errors import ConfigError, UnityCommunicatorStoppedError, UserError
+from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
+from trainer.errors import ConfigError, ResultsWriteError, UnityCommunicatorStoppedError, UserError
 from trainer.protocol.codec import NON_FINITE_STAT
 from trainer.rollout import AgentTracker, concat_masks
 from trainer.stop import EXIT_STOPPED, STOP
@@ -83,8 +87,51 @@ def prepare_run_dir(options) -> str:
             )
         # e.g. a simulator that failed at start: nothing to lose
         logger.info("%s holds only the files of an earlier start that never trained; using it again.", run_dir)
-    os.makedirs(os.path.join(run_dir, "run_logs"), exist_ok=True)
+    try:
+        os.makedirs(os.path.join(run_dir, "run_logs"), exist_ok=True)
+        for folder, _, _ in os.walk(run_dir):  # a folder we cannot write stops us now, not mid-run
+            tempfile.TemporaryFile(dir=folder).close()
+    except OSError as error:
+        if error.errno in WRITE_ERRNOS:
+            raise results_write_error(error.filename or run_dir, error) from None
+        raise
+    if ck.resume:
+        remove_leftover_temp_files(run_dir)
     return run_dir
+
+
+# the temp files of trainer.artifacts.atomic (tempfile.mkstemp: 8 random letters, digits or _)
+_LEFTOVER_TMP = re.compile(r"\..+-[A-Za-z0-9_]{8}\.tmp")
+
+
+def remove_leftover_temp_files(run_dir: str) -> None:
+    """--resume: delete the temp files of writes a killed run did not finish (never read)."""
+    removed = []
+    for folder, _, files in os.walk(run_dir):
+        for name in files:
+            if _LEFTOVER_TMP.fullmatch(name):
+                os.remove(os.path.join(folder, name))
+                removed.append(os.path.relpath(os.path.join(folder, name), run_dir))
+    if removed:
+        logger.info("Removed %d unfinished temp file(s) of the previous run: %s", len(removed), ", ".join(removed))
+
+
+def warn_if_not_loopback(bind: str, ports: str) -> None:
+    """One warning when the server listens beyond this machine: the gRPC protocol of Unity ML-Agents
+    has no authentication, so whoever reaches the port can connect as a simulator."""
+    host = bind.strip().strip("[]")
+    if host == "localhost":
+        return
+    try:
+        if ipaddress.ip_address(host).is_loopback:
+            return
+    except ValueError:
+        pass
+    logger.warning(
+        "--bind %s: the trainer listens beyond this machine on port(s) %s. Unity simulators cannot "
+        "authenticate, so anyone who can reach these ports can connect and send steps. Keep the default "
+        "127.0.0.1 and reach simulators on other nodes through an SSH tunnel or a private network "
+        "(README: Simulators on other machines).", bind, ports)
 
 
 def environment_parameter_messages(manager: EnvironmentParameterManager) -> list[tuple]:
@@ -151,7 +198,10 @@ class RunState:
         runner = BehaviorRunner.create(brain, spec, settings, self.run_dir, seed,
                                        opts.torch_settings.device or "cpu", training=not ck.inference,
                                        use_numpy_update=self.env_vars.numpy_update)
-        if ck.resume or (ck.inference and os.path.isfile(runner.paths.latest)):
+        if ck.resume and not ck.inference:
+            runner.resume(self.status)  # the newest checkpoint that verifies; the folder tidied for it
+            self.save_status()
+        elif ck.resume or (ck.inference and os.path.isfile(runner.paths.latest)):
             runner.restore(runner.paths.latest, reset_step=False)
         elif settings.init_path:
             runner.restore(settings.init_path, reset_step=True)
@@ -208,6 +258,7 @@ class RunState:
             ms = [concat_masks(d, branches) for d in deciding]
             masks = None if ms[0] is None else np.concatenate(ms)
         memories = None
+        crash_points.reached("act")
         if runner.trainer.policy.memory_size:  # each agent continues from its own LSTM state
             memories = np.concatenate([self._tracker(env_id, behavior, runner).memories_for(decision.agent_id)
                                        for env_id, decision, _, _ in steps])
@@ -256,24 +307,25 @@ class RunState:
 
     # ------------------------------------------------------------------ learning
     def learn(self, trajectories: list) -> None:
-        checkpointed = False
         for runner, traj in trajectories:
             before = runner.last_checkpoint_step
             with self.timers.scope("process_trajectory"):
                 stats = runner.add_trajectory(traj, self.status)
-            checkpointed = checkpointed or runner.last_checkpoint_step != before
+            if runner.last_checkpoint_step != before:
+                self.save_status()  # with every checkpoint: a kill right after loses nothing
+                crash_points.reached("checkpoint.status")
             for key, value in stats.items():
                 self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
         for runner in self.runners.values():
             if not runner.done and runner.trainer.ready_to_update():
+                crash_points.reached("update")
                 with self.timers.scope("update"):
                     stats = runner.trainer.update()
+                crash_points.reached("update.done")
                 for key, value in stats.items():
                     self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
             self._maybe_summarize(runner)
         self._update_curriculum()
-        if checkpointed:
-            self.save_status()
 
     def save_status(self) -> None:
         """training_status.json with the checkpoints and the curriculum's lessons as they are now.
@@ -415,6 +467,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
     """Train (or run inference) as configured; ``env_vars``: the MLAGENTS_LIKE_* choices read at
     start (trainer/cli.py; the defaults if None). Returns the process exit code."""
     env_vars = env_vars or EnvVars()
+    crash_points.arm(env_vars.crash_at)
     ck = options.checkpoint_settings
     env = options.env_settings
     pool_settings = PoolSettings(
@@ -447,7 +500,9 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
                      make_routers(env.num_envs), env_vars)
     for line in params.describe():
         logger.info(line)
-    stopped = False
+    stopped = write_failed = False
+    warn_if_not_loopback(env.bind, str(DEFAULT_EDITOR_PORT) if env.env_path is None else
+                         f"{env.base_port}" + (f"-{env.base_port + env.num_envs - 1}" if env.num_envs > 1 else ""))
     try:
         pool.launch()
         # while the simulators boot: import torch and the networks (seconds, on a small machine)
@@ -489,15 +544,29 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
     except UnityCommunicatorStoppedError:
         logger.info("The simulator closed the connection. Learning was interrupted. "
                     "Please wait while the graph is generated.")
+    except ResultsWriteError:
+        write_failed = True  # a final checkpoint would fail the same way: the last good one stays
+        raise
+    except OSError as error:
+        if error.errno not in WRITE_ERRNOS:
+            raise
+        write_failed = True
+        raise results_write_error(error.filename or run_dir, error) from None
     finally:
         state.progress.close()
         # a stop signal also counts when the simulators, signalled with the trainer (scancel, a
         # preemption), closed the connection before the trainer reached its next safe point
         stopped = stopped or STOP.requested is not None
         try:
-            if stopped and not ck.inference:
-                state.summarize_partial()
-            finish_run(state)
+            if not write_failed:
+                if stopped and not ck.inference:
+                    state.summarize_partial()
+                try:
+                    finish_run(state)
+                except OSError as error:
+                    if error.errno not in WRITE_ERRNOS:
+                        raise
+                    raise results_write_error(error.filename or run_dir, error) from None
         finally:
             pool.close()
     if stopped and not ck.inference and not state.finished:

@@ -4,7 +4,8 @@
                    [--num-areas N] [--seed S] [--decision-period K] [--connect-timeout T]
                    [--spin-wait-ms MS] [--transport {http2,grpcio}]
     unity-stub-env --list
-    unity-stub-env --task dodge --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
+    unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
+                   [--evaluate-option KEY=VALUE]
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
@@ -59,10 +60,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--evaluate", action="append", metavar="POLICY", default=None,
                         help="run --task's scripted evaluation (no trainer) with POLICY: a trained .onnx, "
                              "'zero' or 'random' (the last two are always shown beside it); repeatable")
-    parser.add_argument("--episodes", type=int, default=500,
-                        help="--evaluate: random throws after the scripted ones (default 500)")
+    parser.add_argument("--episodes", type=int, default=None,
+                        help="--evaluate: dodge: random throws after the scripted ones (default 500); "
+                             "mimic: trials per motion and push (default 32)")
     parser.add_argument("--json", dest="json_path", default=None, metavar="FILE",
                         help="--evaluate: also write the results as JSON to FILE")
+    parser.add_argument("--evaluate-option", dest="evaluate_options", action="append", default=[],
+                        metavar="KEY=VALUE", help="--evaluate: a task option for every policy, e.g. mimic's "
+                                                  "residual=0.25 for a policy trained with that residual; repeatable")
     parser.add_argument("--write-launcher", metavar="DIR", default=None,
                         help="write DIR/Stub<Task>.x86_64, a Unity-build-like launcher of --task that "
                              "mlagents-learn --env DIR/Stub<Task> (or UnityEnvironment) can start, and exit")
@@ -117,7 +122,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         from unity_stub_env.evaluate import run as run_evaluation
 
-        return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path)
+        return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path,
+                              args.evaluate_options)
     if args.write_launcher is not None:
         path = write_player_launcher(args.write_launcher, args.tasks,
                                      extra_args=spin_wait_args(args.spin_wait_ms / 1e3) + transport_args(args.transport))

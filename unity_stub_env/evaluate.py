@@ -6,7 +6,11 @@ ONNX contract's ``deterministic_continuous_actions``, i.e. the mean action), ``z
 baselines are always evaluated beside it. Printed per policy, for the scripted and the random
 throws: hit rate, the hit rate of the throws aimed above the pelvis (with their count: the ones
 fixed feet leave dodgeable), balance-loss rate, pass rate, mean effort (the effort terms' magnitudes summed
-over an episode, averaged over the episodes) and mean episode return. Tasks with an evaluation are listed in ``EVALUATIONS``.
+over an episode, averaged over the episodes) and mean episode return. ``mimic``: per reference motion,
+the fraction of trials that kept their balance for 10 s and the mean reward terms r_r, r_v, r_m, r_e,
+r_t; then standing under pushes of growing impulse (``unity_stub_env.tasks.mimic.evaluate``), with
+an extra row for the PD controllers tracking the reference on their own. Tasks with an evaluation
+are the keys of ``_evaluations``.
 """
 from __future__ import annotations
 
@@ -26,9 +30,19 @@ class PolicyError(ValueError):
 
 
 def _evaluations() -> dict:
-    from unity_stub_env.tasks import dodge
+    """task -> (evaluate(act, seed, episodes, **options), format_table(results), default episodes)."""
+    from unity_stub_env.tasks import dodge, mimic
 
-    return {"dodge": dodge.evaluate}
+    return {"dodge": (dodge.evaluate, format_table, 500), "mimic": (mimic.evaluate, mimic.format_table, 32)}
+
+
+# The options ``--evaluate-option KEY=VALUE`` may set, per task (float values).
+OPTIONS = {"mimic": ("residual",)}
+
+
+# Rows a task evaluates beside the baselines: label -> (policy, the task's evaluate options).
+# mimic: zero actions in residual mode, i.e. the PD controllers tracking the reference unaided.
+EXTRA_ROWS = {"mimic": {"reference PD": ("zero", {"residual": 1.0})}}
 
 
 def load_policy(spec: str, observation_size: int, action_size: int, seed: int) -> Callable[[np.ndarray], np.ndarray]:
@@ -67,13 +81,31 @@ def load_policy(spec: str, observation_size: int, action_size: int, seed: int) -
     return act
 
 
-def run(task_name: str, policies: list[str], seed: int, episodes: int, json_path: str | None = None) -> int:
+def parse_options(task_name: str, pairs: list[str]) -> dict[str, float]:
+    """``["residual=0.25"]`` -> ``{"residual": 0.25}``; PolicyError names the task's known options."""
+    known, options = OPTIONS.get(task_name, ()), {}
+    for pair in pairs:
+        key, _, value = pair.partition("=")
+        if key not in known:
+            raise PolicyError(f"--evaluate-option {pair!r}: task {task_name} takes "
+                              f"{', '.join(k + '=NUMBER' for k in known) or 'no options'}")
+        try:
+            options[key] = float(value)
+        except ValueError:
+            raise PolicyError(f"--evaluate-option {pair!r}: {value!r} is not a number") from None
+    return options
+
+
+def run(task_name: str, policies: list[str], seed: int, episodes: int | None, json_path: str | None = None,
+        option_pairs: list[str] | None = None) -> int:
     """Evaluate every policy (baselines added), print a table; exit code 0, or 2 on bad input."""
     evaluations = _evaluations()
     if task_name not in evaluations:
         print(f"unity-stub-env: task {task_name!r} has no scripted evaluation; tasks with one: "
               f"{', '.join(sorted(evaluations))}.", file=sys.stderr)
         return 2
+    evaluate, format_results, default_episodes = evaluations[task_name]
+    episodes = default_episodes if episodes is None else episodes
     if episodes < 1:
         print(f"unity-stub-env: --episodes must be 1 or more, got {episodes}.", file=sys.stderr)
         return 2
@@ -84,19 +116,23 @@ def run(task_name: str, policies: list[str], seed: int, episodes: int, json_path
     action_size = task_class.action_spec.continuous_size
     names = list(dict.fromkeys([*policies, *BASELINES]))
     try:
+        options = parse_options(task_name, option_pairs or [])
         actors = {name: load_policy(name, observation_size, action_size, seed) for name in names}
-        results = {name: evaluations[task_name](actors[name], seed=seed, episodes=episodes) for name in names}
+        results = {name: evaluate(actors[name], seed=seed, episodes=episodes, **options) for name in names}
+        for label, (policy, extra) in EXTRA_ROWS.get(task_name, {}).items():
+            results[label] = evaluate(actors[policy], seed=seed, episodes=episodes, **{**options, **extra})
     except PolicyError as error:
         print(f"unity-stub-env: {error}", file=sys.stderr)
         return 2
-    print(format_table(results))
+    print(format_results(results))
     if json_path:
-        Path(json_path).write_text(json.dumps({"task": task_name, "seed": seed, "results": results}, indent=1))
+        Path(json_path).write_text(json.dumps({"task": task_name, "seed": seed, "options": options,
+                                               "results": results}, indent=1))
     return 0
 
 
 def format_table(results: dict) -> str:
-    """Markdown: one row per policy and throw set, then each policy's scripted throws."""
+    """dodge's table. Markdown: one row per policy and throw set, then each policy's scripted throws."""
     lines = ["| policy | throws | episodes | hit rate | upper-body hit rate | balance-loss rate | pass rate | "
              "mean effort | mean return |", "|---|---|---|---|---|---|---|---|---|"]
     for name, result in results.items():

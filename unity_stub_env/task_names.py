@@ -2,4 +2,4 @@
 trainer can refuse ``--env stub:NAME`` for an unknown NAME before it creates anything.
 tests/stub keeps this in step with ``unity_stub_env.tasks.TASKS``."""
 
-TASK_NAMES = ("ball3d", "basic", "dodge")
+TASK_NAMES = ("ball3d", "basic", "dodge", "mimic")

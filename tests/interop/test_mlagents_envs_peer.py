@@ -29,8 +29,13 @@ DOCUMENTED_SPECS = {
                                "name": "VectorSensor_size17"}],
         "action_spec": {"continuous_size": 9, "discrete_branches": []},
     }},
+    "mimic": {"Mimic?team=0": {
+        "observation_specs": [{"shape": [170], "dimension_property": [1], "observation_type": 0,
+                               "name": "VectorSensor_size170"}],
+        "action_spec": {"continuous_size": 26, "discrete_branches": []},
+    }},
 }
-AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14}  # agents per area; one area by default
+AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14, "mimic": 8}  # agents per area; one area by default
 STEPS = 500
 
 
@@ -80,6 +85,23 @@ def test_unity_environment_runs_stub_task(task, run_peer, stub_executable, free_
         hits, passes = result["stats"]["Dodge/Hit"], result["stats"]["Dodge/Passed"]
         assert len(hits) == len(passes) == result["terminal_steps"]
         assert sum(value for value, _ in hits) + sum(value for value, _ in passes) >= result["terminal_steps"]
+    if task == "mimic":
+        # uniform random PD targets over the whole ranges topple the ragdoll within ~1 s (50 decisions)
+        assert result["terminal_steps"] >= 8 * STEPS // 50
+        fell = result["stats"]["Mimic/Fell"]
+        assert len(fell) == result["terminal_steps"] and {value for value, _ in fell} == {1.0}
+        assert 0.0 < np.mean([value for value, _ in result["stats"]["Mimic/r_r"]]) < 0.2
+        np.testing.assert_allclose(np.linalg.norm(first_obs[:, :4], axis=1), 1.0, atol=1e-4)  # pelvis quaternion
+
+
+def test_environment_parameters_pick_the_mimic_motion_and_its_controller(run_peer, stub_executable, free_port):
+    """motion=2 (squat) with residual=1: zero actions leave the PD controllers on the reference,
+    which squat for the whole 200 decisions (4 s) without falling; the phase advances 1/200 per step."""
+    result = _rollout(run_peer, stub_executable, free_port, "mimic", steps=200, zero_actions=True,
+                      env_float_parameters={"motion": 2.0, "residual": 1.0})
+    assert result["terminal_steps"] == 0 and result["id_errors"] == []
+    phase = np.asarray(result["first_obs"]["Mimic?team=0"])[:, -1]
+    assert ((phase > 0) & (phase < 1)).all()
 
 
 def test_side_channels_reach_the_stub_and_back(run_peer, stub_executable, free_port, tmp_path, is_gone):

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import trainer.artifacts.checkpoints as checkpoints
-from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
+from trainer.artifacts.checkpoints import FORMAT_KEY, CheckpointError, content_digest, load_checkpoint, save_checkpoint
 from trainer.errors import UserError
 
 STATE = {
@@ -55,7 +55,7 @@ def test_malicious_pickle_is_refused(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     path = tmp_path / "checkpoint.pt"
     torch.save({"Policy": Malicious()}, path)  # torch.save pickles the __reduce__ payload
-    with pytest.raises(UserError, match="corrupt or not a trainer checkpoint"):
+    with pytest.raises(UserError, match="corrupt, truncated or not a trainer checkpoint"):
         load_checkpoint(path)
     assert not (tmp_path / "pwned-marker").exists()
     path.write_bytes(pickle.dumps(Malicious(), protocol=2))
@@ -104,3 +104,65 @@ def test_atomic_copy_replaces_whole_or_not_at_all(tmp_path, monkeypatch):
         atomic.atomic_copy(source, final)
     assert final.read_bytes() == b"new model " * 1000  # untouched, no temp file left behind
     assert sorted(os.listdir(tmp_path)) == ["Basic-300.onnx", "Basic.onnx"]
+
+
+def test_files_carry_a_format_version_and_a_content_checksum(tmp_path):
+    path = tmp_path / "checkpoint.pt"
+    save_checkpoint(path, STATE)
+    raw = torch.load(path, weights_only=True)  # still a plain torch archive
+    assert int(raw[FORMAT_KEY]["version"]) == checkpoints.FORMAT_VERSION == 1
+    body = {k: v for k, v in raw.items() if k != FORMAT_KEY}
+    assert bytes(raw[FORMAT_KEY]["sha256"].tolist()) == content_digest(body) == content_digest(STATE)
+    assert FORMAT_KEY not in load_checkpoint(path)
+
+
+def test_content_digest_sees_every_value_dtype_and_shape():
+    base = content_digest(STATE)
+    changed = [
+        {**STATE, "Policy": {"weight": STATE["Policy"]["weight"].clone().index_put_((torch.tensor([0]), torch.tensor([0])), torch.tensor(0.5))}},
+        {**STATE, "Policy": {"weight": STATE["Policy"]["weight"].reshape(3, 2)}},
+        {**STATE, "Policy": {"weight": STATE["Policy"]["weight"].double()}},
+        {**STATE, "global_step": {"step": torch.tensor(43)}},
+        {**STATE, "notes": ["a", 1, 2.5, None, False]},
+        {k: v for k, v in STATE.items() if k != "notes"},
+    ]
+    digests = {content_digest(state) for state in changed}
+    assert base not in digests and len(digests) == len(changed)
+    assert content_digest(dict(reversed(list(STATE.items())))) == base  # key order does not matter
+
+
+def _flip_a_weight_in_place(path):
+    """Change one float of the stored weight, keeping the archive valid: bit rot, or an edit."""
+    state = torch.load(path, weights_only=True)
+    state["Policy"]["weight"][0, 1] += 1.0
+    torch.save(state, path)  # the old Format entry (and its digest) kept
+
+
+def test_a_changed_or_truncated_file_fails_naming_it(tmp_path):
+    path = tmp_path / "Ball-42.pt"
+    save_checkpoint(path, STATE)
+    _flip_a_weight_in_place(path)
+    with pytest.raises(CheckpointError, match="fails its checksum") as error:
+        load_checkpoint(path)
+    assert str(path) in str(error.value)
+    save_checkpoint(path, STATE)
+    whole = path.read_bytes()
+    for cut in (len(whole) // 3, len(whole) - 30):
+        path.write_bytes(whole[:cut])
+        with pytest.raises(CheckpointError, match="corrupt, truncated") as error:
+            load_checkpoint(path)
+        assert str(path) in str(error.value)
+
+
+def test_a_newer_format_is_refused_and_an_unstamped_file_loads_with_a_warning(tmp_path, caplog):
+    path = tmp_path / "checkpoint.pt"
+    future = dict(STATE)
+    future[FORMAT_KEY] = {"version": torch.tensor(2), "sha256": torch.tensor(list(content_digest(STATE)),
+                                                                             dtype=torch.uint8)}
+    torch.save(future, path)
+    with pytest.raises(CheckpointError, match="format version 2, newer than"):
+        load_checkpoint(path)
+    torch.save(STATE, path)  # ML-Agents' own checkpoints have no Format entry
+    with caplog.at_level("WARNING", logger="mlagents_like"):
+        assert int(load_checkpoint(path)["global_step"]["step"]) == 42
+    assert "no format version or checksum" in caplog.text

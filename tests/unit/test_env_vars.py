@@ -54,3 +54,12 @@ def test_the_job_templates_variables_reach_the_trainer_without_being_refused():
     env = EnvVars.from_environ({"MLAGENTS_LIKE_IMAGE": "/images/mlagents-like.sif",
                                 "MLAGENTS_LIKE_VENV": "/home/me/mlagents-like/.venv"})
     assert env == EnvVars()
+
+
+def test_the_crash_hook_names_a_known_point_an_occurrence_and_optionally_a_stop_signal():
+    assert EnvVars.from_environ({}).crash_at is None
+    assert EnvVars.from_environ({"MLAGENTS_LIKE_CRASH_AT": "checkpoint.onnx:3"}).crash_at == ("checkpoint.onnx", 3)
+    assert EnvVars.from_environ({"MLAGENTS_LIKE_CRASH_AT": "update:2:SIGUSR1"}).crash_at == ("update", 2, "SIGUSR1")
+    for bad in ("nowhere:1", "act:0", "act", "act:x", "act:1:SIGSEGV", "act:1:2:3"):
+        with pytest.raises(ConfigError, match="MLAGENTS_LIKE_CRASH_AT"):
+            EnvVars.from_environ({"MLAGENTS_LIKE_CRASH_AT": bad})

@@ -186,6 +186,10 @@ class TrainingStatus:
         entry[CHECKPOINTS] = tracked
         return [CheckpointEntry.from_dict(d) for d in dropped]
 
+    def set_checkpoints(self, brain: str, entries: list[CheckpointEntry]) -> None:
+        """Replace the brain's tracked checkpoints (oldest first)."""
+        self._category(brain)[CHECKPOINTS] = [e.to_dict() for e in entries]
+
     def set_final_checkpoint(self, brain: str, checkpoint: CheckpointEntry) -> None:
         self._category(brain)[FINAL_CHECKPOINT] = checkpoint.to_dict()
 

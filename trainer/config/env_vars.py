@@ -26,6 +26,9 @@ MLAGENTS_LIKE_TRANSPORT        ``transport``      http2: the gRPC transport of t
                                                  of the stubs it launches; or grpcio
 MLAGENTS_LIKE_NUMPY_UPDATE     ``numpy_update``   1: PPO's minibatch steps in numpy where the network
                                                  allows it; 0 keeps torch autograd (trainer/ppo)
+MLAGENTS_LIKE_CRASH_AT         ``crash_at``       unset: a test hook, ``POINT:N[:SIGNAL]`` makes the
+                                                 trainer SIGKILL itself (or send SIGNAL) the Nth time
+                                                 it reaches the named point (trainer/crash_points.py)
 =============================  ================  ====================================================
 """
 from __future__ import annotations
@@ -44,7 +47,8 @@ BLAS_THREADS = PREFIX + "BLAS_THREADS"
 SPIN_WAIT_MS = PREFIX + "SPIN_WAIT_MS"
 TRANSPORT = PREFIX + "TRANSPORT"
 NUMPY_UPDATE = PREFIX + "NUMPY_UPDATE"
-KNOWN = (TORCH_THREADS, BLAS_THREADS, SPIN_WAIT_MS, TRANSPORT, NUMPY_UPDATE)
+CRASH_AT = PREFIX + "CRASH_AT"
+KNOWN = (TORCH_THREADS, BLAS_THREADS, SPIN_WAIT_MS, TRANSPORT, NUMPY_UPDATE, CRASH_AT)
 JOB_TEMPLATE_ONLY = (PREFIX + "IMAGE", PREFIX + "VENV")  # read by docker/slurm/train.sbatch only
 
 TRANSPORTS = ("http2", "grpcio")  # the gRPC transports of trainer/protocol/server.py
@@ -60,6 +64,7 @@ class EnvVars:
     spin_wait_s: float = DEFAULT_SPIN_WAIT_S
     transport: str = "http2"
     numpy_update: bool = True
+    crash_at: tuple | None = None  # test hook: (point, occurrence[, signal]), trainer/crash_points.py
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str] = os.environ) -> "EnvVars":
@@ -78,6 +83,7 @@ class EnvVars:
             spin_wait_s=_spin_wait_s(values[SPIN_WAIT_MS]),
             transport=_transport(values[TRANSPORT]),
             numpy_update=_numpy_update(values[NUMPY_UPDATE]),
+            crash_at=_crash_at(values[CRASH_AT]),
         )
 
 
@@ -117,3 +123,19 @@ def _numpy_update(value: str) -> bool:
         return False
     raise ConfigError(f"{NUMPY_UPDATE}={value!r} is neither 0 nor 1; use {NUMPY_UPDATE}=1 (the default: "
                       f"minibatch updates in numpy) or {NUMPY_UPDATE}=0 (torch autograd).")
+
+
+def _crash_at(value: str) -> tuple[str, int] | None:
+    if not value:
+        return None
+    from trainer.crash_points import POINTS
+
+    parts = value.split(":")
+    if len(parts) in (2, 3) and parts[0] in POINTS and re.fullmatch(r"[0-9]+", parts[1]) and int(parts[1]) >= 1:
+        if len(parts) == 2:
+            return parts[0], int(parts[1])
+        if parts[2] in ("SIGTERM", "SIGUSR1", "SIGINT", "SIGQUIT", "SIGKILL"):
+            return parts[0], int(parts[1]), parts[2]
+    raise ConfigError(f"{CRASH_AT}={value!r} is not POINT:N[:SIGNAL] with N >= 1, POINT one of "
+                      f"{', '.join(POINTS)} and SIGNAL a stop signal (a test hook that kills or stops the "
+                      f"trainer; unset it for a normal run).")

@@ -39,6 +39,9 @@ TOP_LEVEL_KEYS = (
     "debug",
 )
 CONFIGURATION_FILE_NAME = "configuration.yaml"
+# refused before parsing: the largest real ML-Agents config is a few KiB, and parsing 50 MB of YAML
+# took 71 s and 566 MB (docs/reliability.md)
+MAX_CONFIG_BYTES = 1 << 20
 
 
 class _StrictSafeLoader(yaml.SafeLoader):
@@ -63,6 +66,12 @@ def read_yaml_file(path: str) -> Any:
     if not os.path.isfile(path):
         what = "is a directory" if os.path.isdir(path) else "could not be found"
         raise ConfigError(f"Config file {what}: {os.path.abspath(path)}. Pass the path of a YAML file.")
+    size = os.path.getsize(path)
+    if size > MAX_CONFIG_BYTES:
+        raise ConfigError(
+            f"Config file {path} is {size / 2**20:.1f} MiB; a trainer configuration is at most "
+            f"{MAX_CONFIG_BYTES // 2**20} MiB (real ones are a few KiB). Pass the right file."
+        )
     try:
         with open(path, encoding="utf-8") as stream:
             text = stream.read()
@@ -210,6 +219,20 @@ def check_run_options(options: RunOptions) -> None:
     _check(engine.time_scale > 0, "--time-scale", "engine_settings.time_scale", "> 0", engine.time_scale)
     run_id = options.checkpoint_settings.run_id
     _check(bool(run_id.strip()), "--run-id", "checkpoint_settings.run_id", "a non-empty name", repr(run_id))
+    check_folder_name(run_id, "--run-id", "checkpoint_settings.run_id")
+    init = options.checkpoint_settings.initialize_from
+    if init is not None:
+        check_folder_name(init, "--initialize-from", "checkpoint_settings.initialize_from")
+
+
+def check_folder_name(name: str, flag: str, key: str) -> None:
+    """A run id names one folder inside --results-dir: no separators, not '.' or '..', no NUL."""
+    separators = {"/", os.sep} | ({os.altsep} if os.altsep else set())
+    if name in (".", "..") or "\0" in name or any(sep in name for sep in separators):
+        raise ConfigError(
+            f"{flag} ({key}) must be a plain folder name inside --results-dir (no '/', '..' or '.'), "
+            f"got {name!r}. To write elsewhere, use --results-dir."
+        )
 
 
 def write_run_options(options: RunOptions, output_dir: str | None = None) -> str:

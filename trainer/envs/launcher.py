@@ -6,6 +6,7 @@ with the same Unity-style arguments, so everything downstream treats both alike.
 """
 from __future__ import annotations
 
+import errno
 import glob
 import logging
 import os
@@ -15,7 +16,7 @@ import sys
 from collections import deque
 from typing import IO
 
-from trainer.errors import ConfigError, EnvironmentNotFoundError
+from trainer.errors import ConfigError, EnvironmentNotFoundError, UserError
 from unity_stub_env import spin_wait_args, transport_args
 
 logger = logging.getLogger("mlagents_like")
@@ -233,6 +234,17 @@ class SimulatorProcess:
             raise EnvironmentNotFoundError(
                 f"Cannot run {self.command[0]!r}: no such file. Check the --env path."
             ) from error
+        except OSError as error:
+            self._close_log()
+            if error.errno != errno.E2BIG:
+                raise
+            longest = max(len(os.fsencode(a)) for a in self.command)
+            raise UserError(
+                f"Cannot start simulator worker {self.worker_id} ({self.name}): its command line is too long for the operating system "
+                f"({sum(len(os.fsencode(a)) + 1 for a in self.command)} bytes in {len(self.command)} arguments, "
+                f"the longest {longest} bytes). Shorten --env-args (env_settings.env_args), e.g. pass the "
+                f"values in a file the game reads."
+            ) from None
         return self
 
     def is_alive(self) -> bool:

@@ -152,10 +152,25 @@ class EnvPool:
         """Handshake with every launched simulator (waits up to --timeout-wait for each)."""
         try:
             for w in self.workers:
-                w.handshake()
+                self._handshake(w)
         except BaseException:
             self.close()
             raise
+
+    def _handshake(self, w: _Worker) -> None:
+        """Handshake with ``w``; a simulator that dies before it (killed while it boots) is
+        started again within its restart quota. One that never answers is not: it would again
+        take --timeout-wait, and is most likely a wrong --env or a Unity build that hangs."""
+        while True:
+            try:
+                w.handshake()
+                return
+            except SimulatorExitedError as err:
+                if w.process is None or not self._restarts[w.worker_id].allow_restart(time.monotonic()):
+                    raise
+                logger.warning("Worker %d failed before its first message (%s); restarting it.", w.worker_id, err)
+                w.close(timeout=2.0)
+                w.launch()
 
     def reset(self, side_channel: bytes | list[bytes]) -> list[StepResult]:
         """RESET every worker; a simulator that dies meanwhile is restarted like in ``receive``."""
@@ -211,7 +226,8 @@ class EnvPool:
 
     def _restart_process(self, failed: _Worker) -> None:
         failed.close(timeout=2.0)
-        failed.connect()
+        failed.launch()
+        self._handshake(failed)
 
     def _per_worker(self, side_channel: bytes | list[bytes]) -> list[bytes]:
         if isinstance(side_channel, (bytes, bytearray)):

@@ -12,11 +12,13 @@ from unity_stub_env.tasks.ball3d import Ball3DTask
 from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
 from unity_stub_env.tasks.basic import BasicTask
 from unity_stub_env.tasks.dodge import DodgeTask
+from unity_stub_env.tasks.mimic import MimicTask
 
 TASKS: dict[str, type[Task]] = {
     BasicTask.name: BasicTask,
     Ball3DTask.name: Ball3DTask,
     DodgeTask.name: DodgeTask,
+    MimicTask.name: MimicTask,
 }
 
 
@@ -28,4 +30,4 @@ def make_task(name: str, num_areas: int = 1, seed: int = 0,
     return TASKS[name](num_areas=num_areas, seed=seed, env_params=env_params)
 
 
-__all__ = ["TASKS", "make_task", "Task", "TaskStep", "EnvironmentParameters", "BasicTask", "Ball3DTask", "DodgeTask"]
+__all__ = ["TASKS", "make_task", "Task", "TaskStep", "EnvironmentParameters", "BasicTask", "Ball3DTask", "DodgeTask", "MimicTask"]

@@ -13,7 +13,8 @@ one JSON object on the last stdout line:
 
 Usage: python random_rollout.py '{"file_name": ..., "base_port": ..., "steps": 500,
         "env_float_parameters": {"gravity": 0.0}, "engine_config": {"time_scale": 7.0},
-        "additional_args": ["-logFile", "/tmp/x.log"]}'
+        "additional_args": ["-logFile", "/tmp/x.log"], "zero_actions": false}'
+("zero_actions": true sends all-zero actions instead of random ones)
 """
 import json
 import sys
@@ -101,7 +102,9 @@ def main():
                 if step == 1:
                     result["first_obs"][name] = decision.obs[0].tolist()
                 if len(decision) > 0:
-                    env.set_actions(name, env.behavior_specs[name].action_spec.random_action(len(decision)))
+                    spec = env.behavior_specs[name].action_spec
+                    make = spec.empty_action if options.get("zero_actions") else spec.random_action
+                    env.set_actions(name, make(len(decision)))
             if step == options.get("steps", 500):
                 break
             env.step()

@@ -1,0 +1,493 @@
+"""``mimic``: a physically simulated ragdoll keeps its balance and imitates reference motions.
+
+The character (``mimic.xml`` beside this file; z up, y forward, x the character's right) is a
+70 kg ragdoll of 16 capsule/box segments with a free root (the pelvis). Masses follow the human
+fractions (head+neck 6.81 %, trunk 43.02 % split into pelvis 14.2 and torso 28.82, upper arm 2.63,
+forearm 1.5, hand 0.585, thigh 14.47, shank 4.57, foot 1.33 %); the soles have friction 2 (the other
+geoms 1). Joints, 26 unlocked hinge axes (degrees; positive = flexion, abduction, lateral rotation,
+bending right):
+  waist x -30..80, y -35..35, z -45..45     neck x -60..50, y -45..45, z -80..80
+  shoulder x -60..170, y -30..160, z -90..90   elbow 0..150 (the wrists are locked: the hand is
+  welded to the forearm)
+  hip x -30..120, y -30..45, z -45..45      knee 0..150      ankle x -50..40, y -25..25
+Every axis is driven by a PD controller, a MuJoCo position actuator (torque = kp (target - q) -
+kv q', limited; kv is integrated implicitly): waist, hips and knees kp 1500 N m/rad, kv 150 N m s/rad,
+|torque| <= 400 N m; ankles 1500/150/250; shoulders 150/15/100; elbows 80/8/60; neck 100/10/60.
+Why so stiff at the ankles: standing is an inverted pendulum needing m g h ~ 70 * 9.81 * 1 ~ 700
+N m/rad from the two ankles together; at 300 each the character sagged and fell within 2 s. With the
+targets on the reference pose (``residual`` mode, zero actions) these gains hold stand, arms and
+squat for 10 s (r_r 1.00, 0.96, 0.95) and withstand a 10 N s push every 2 s, not 20; the walk
+falls within 0.6 s (``unity-stub-env --task mimic --evaluate zero``, row "reference PD").
+Ragdolls never touch each other (collision bits: ragdoll geoms only meet the floor) and have no
+self-collision, so one MjModel holds all ``num_areas * 8`` of them.
+
+Control: MuJoCo steps of 0.004 s (250 Hz, the thesis' physics and PD rate), one action every 5 of
+them: 50 decisions per second, not the thesis' 250. Why: the PD loop still runs at 250 Hz inside
+MuJoCo, and at 250 decisions/s a 10 s episode is 2,500 agent steps, so the few hundred thousand
+steps a bench run affords on this machine would be ~100 episodes; DeepMimic itself decides at
+30 Hz over a 1.2 kHz simulation. Episodes are interrupted after max_step = 500 decisions (10 s).
+
+Actions, 26 continuous in [-1, 1], one per axis in mimic.xml's actuator order (``JOINTS`` of
+``mimic_motions``). Environment parameter ``residual`` (read at episode start):
+  0 (default, the thesis): target = low + (a + 1) / 2 (high - low), the action mapped linearly
+    onto the axis' limits (a = 0 is the middle of the range, not the standing pose);
+  r > 0 (DeepMimic-like, our option): target = reference angle + a r (high - low) / 2, clipped to
+    the limits: zero actions track the reference and the policy learns corrections.
+
+Observations, float32 [170] per agent: for each of 13 body parts (pelvis, torso, head, upper arms,
+forearms, thighs, shanks, feet: ``OBSERVED``; the hands are welded, so their state is the forearms')
+13 values: the local rotation (quaternion w, x, y, z relative to the parent part, w >= 0; the
+pelvis' is its world orientation), the linear velocity and the angular velocity, and the position
+relative to the pelvis (for the pelvis: 0, 0, its height above the floor), all three vectors in the
+pelvis frame; then the phase of the reference in [0, 1) (frame / frames; 0 for ``stand``). The
+reference pose itself is not observed.
+
+Reference motions (``mimic_motions``: stand, arms, squat, walk, CSV files at 50 Hz made by
+``python -m unity_stub_env.tasks.mimic_motions``), chosen per episode by the environment parameter
+``motion`` = 0 stand, 1 arms, 2 squat, 3 walk (a curriculum can move between them). The reference
+is kinematic: only its numbers are used. For the walk the reference's forward position follows the
+ragdoll's pelvis (as the thesis does), for the other motions it stays at the agent's base.
+
+Reward (DeepMimic-style, each decision, against the reference frame reached by that decision):
+  R = w_r r_r + w_v r_v + w_m r_m + w_e r_e + w_t r_t with
+  r_r = exp(-k_r sum_j angle(q_j, q^_j)^2)  the 13 parts' local rotations (the pelvis' world one)
+  r_v = exp(-k_v sum_j (v_j - v^_j)^2)      the 26 joint velocities and the root angular velocity
+  r_m = exp(-k_m |m - m^|^2)                 centre of mass (world)
+  r_e = exp(-k_e sum_e |p_e - p^_e|^2)       hands and feet (world; geom centres)
+  r_t = exp(-k_t (v_y - v^_y)^2)             forward pelvis velocity against the clip's mean speed
+Weights (environment parameter ``reward_weights``): 0 = the thesis' (per motion, its tables 5.4,
+5.6, 5.8, 5.10: stand and arms w_r 0.7, w_v 0.15, w_m 0.15; squat 0.65, 0.1, 0.1, w_e 0.15; walk 0.56,
+0.07, 0.07, 0.1, w_t 0.2), 1 = DeepMimic's (pose 0.65, velocity 0.1, end effectors 0.15, CoM 0.1).
+Scales: DeepMimic's k_r 2, k_v 0.1, k_e 40, k_m 10 (the thesis does not give its own), k_t 2 (our
+choice: 0.5 m/s off costs 40 %). Any single value can be overridden by the environment parameters
+``w_r w_v w_m w_e w_t k_r k_v k_m k_e k_t`` (negative = keep the preset).
+
+Episodes: reference state initialisation (``rsi`` 1, default: a random frame of the clip, its pose
+and velocities copied into the ragdoll; 0: frame 0). Early termination: a geom other than a foot
+touches the floor, or the centre of mass is more than ``max_drift`` (default 0.5 m) from the
+reference's. Optional pushes: every ``push_interval`` s (default 2) of an episode, when
+``push_impulse`` (N s, default 0 = none) is positive, the torso gets that horizontal impulse in a
+random direction, as a constant force over one decision (0.02 s).
+Stats: Mimic/r_r, r_v, r_m, r_e (episode means) and Mimic/Fell, at each episode's end.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from protos.types import (
+    ActionSpec,
+    DimensionProperty,
+    ObservationSpec,
+    ObservationType,
+    StatsAggregationMethod,
+)
+from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
+from unity_stub_env.tasks.mimic_motions import JOINTS, MOTIONS, RATE, load_motion
+
+XML_PATH = Path(__file__).with_name("mimic.xml")
+AGENTS_PER_AREA = 8
+AGENT_SPACING = 2.0  # m between the ragdolls of an area (x); areas 4 m apart (y). They never collide.
+AREA_SPACING = 4.0
+SUBSTEPS = 5  # MuJoCo steps of 0.004 s per decision: 50 Hz
+CONTROL_DT = 1.0 / RATE
+OBSERVED = ("pelvis", "torso", "head", "upper_arm_r", "forearm_r", "upper_arm_l", "forearm_l",
+            "thigh_r", "shank_r", "foot_r", "thigh_l", "shank_l", "foot_l")
+END_EFFECTORS = ("hand_r", "hand_l", "foot_r", "foot_l")  # geoms
+FEET = ("foot_r", "foot_l")
+OBSERVATION_SIZE = 13 * len(OBSERVED) + 1
+TERMS = ("r_r", "r_v", "r_m", "r_e", "r_t")
+THESIS_WEIGHTS = {"stand": (0.7, 0.15, 0.15, 0.0, 0.0), "arms": (0.7, 0.15, 0.15, 0.0, 0.0),
+                  "squat": (0.65, 0.1, 0.1, 0.15, 0.0), "walk": (0.56, 0.07, 0.07, 0.1, 0.2)}
+DEEPMIMIC_WEIGHTS = (0.65, 0.1, 0.1, 0.15, 0.0)  # in TERMS order: pose, velocity, CoM, end effectors
+SCALES = (2.0, 0.1, 10.0, 40.0, 2.0)  # k_r, k_v, k_m, k_e, k_t
+MAX_DRIFT = 0.5
+PUSH_INTERVAL = 2.0
+
+
+def reward_terms(rot_sq: np.ndarray, vel_sq: np.ndarray, com_sq: np.ndarray, end_sq: np.ndarray,
+                 speed_sq: np.ndarray, scales) -> np.ndarray:
+    """[n, 5]: the five terms exp(-k x) from the summed squared errors (each float [n])."""
+    errors = np.stack([rot_sq, vel_sq, com_sq, end_sq, speed_sq], axis=-1)
+    return np.exp(-np.asarray(scales, dtype=np.float64) * errors)
+
+
+def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle (rad) of the rotation between unit quaternions a and b [..., 4]."""
+    dot = np.abs((a * b).sum(axis=-1))
+    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+
+
+def quat_conj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def build_model(num_agents: int) -> tuple[mujoco.MjModel, np.ndarray]:
+    """The MjModel of ``num_agents`` ragdolls (names prefixed ``a<i>/``) and their bases [n, 3]."""
+    spec = mujoco.MjSpec.from_file(str(XML_PATH))
+    spec.delete(spec.body("pelvis"))
+    index = np.arange(num_agents)
+    base = np.column_stack([(index % AGENTS_PER_AREA) * AGENT_SPACING,
+                            (index // AGENTS_PER_AREA) * AREA_SPACING, np.zeros(num_agents)])
+    text = XML_PATH.read_text()
+    for i in range(num_agents):
+        agent = mujoco.MjSpec.from_string(text)
+        spec.worldbody.add_frame(pos=base[i]).attach_body(agent.body("pelvis"), f"a{i}/", "")
+    return spec.compile(), base
+
+
+class Reference:
+    """Every motion's frames and what the reward and RSI need of them, concatenated over MOTIONS
+    (``offset[m]``, ``frames[m]``): qpos [F, 33], qvel [F, 32], local part rotations [F, 13, 4],
+    CoM [F, 3] and end effectors [F, 4, 3] relative to the reference root's horizontal position,
+    joint-velocity vector [F, 29] (26 joints + root angular), the walk's stride and mean speed."""
+
+    def __init__(self) -> None:
+        model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+        data = mujoco.MjData(model)
+        parts = [model.body(name).id for name in OBSERVED]
+        parents = model.body_parentid[parts]
+        ends = [model.geom(name).id for name in END_EFFECTORS]
+        joint_dof = [model.joint(j).dofadr[0] for j in JOINTS]
+        qpos, qvel, rot, com, end, speed, frames, offset, stride = [], [], [], [], [], [], [], [], []
+        for name in MOTIONS:
+            q = load_motion(name).qpos
+            count = len(q)
+            step = (q[-1, 1] - q[-2, 1]) if name == "walk" else 0.0
+            stride.append(q[-1, 1] + step if name == "walk" else 0.0)
+            after = q[np.arange(1, count + 1) % count].copy()
+            before = q[np.arange(-1, count - 1) % count].copy()
+            after[-1, 1] += stride[-1]
+            before[0, 1] -= stride[-1]
+            v = np.zeros((count, model.nv))
+            for k in range(count):
+                mujoco.mj_differentiatePos(model, v[k], 2 * CONTROL_DT, before[k], after[k])
+            for k in range(count):
+                data.qpos[:] = q[k]
+                data.qvel[:] = v[k]
+                mujoco.mj_kinematics(model, data)
+                mujoco.mj_comPos(model, data)
+                xquat = data.xquat.copy()
+                local = quat_mul(quat_conj(xquat[parents]), xquat[parts])
+                local[0] = xquat[parts[0]]
+                rot.append(local)
+                root = np.array([q[k, 0], q[k, 1], 0.0])
+                com.append(data.subtree_com[parts[0]] - root)
+                end.append(data.geom_xpos[ends] - root)
+            qpos.append(q)
+            qvel.append(v)
+            offset.append(sum(frames))
+            frames.append(count)
+            speed.append(stride[-1] / (count * CONTROL_DT))
+        self.qpos, self.qvel = np.concatenate(qpos), np.concatenate(qvel)
+        self.rot, self.com, self.end = np.array(rot), np.array(com), np.array(end)
+        self.joint_vel = np.concatenate([self.qvel[:, joint_dof], self.qvel[:, 3:6]], axis=1)
+        self.frames, self.offset = np.array(frames), np.array(offset)
+        self.stride, self.speed = np.array(stride), np.array(speed)
+        self.joints = self.qpos[:, 7:]
+
+
+class MimicTask(Task):
+    name = "mimic"
+    behavior_name = "Mimic"
+    observation_specs = (
+        ObservationSpec((OBSERVATION_SIZE,), (DimensionProperty.NONE,), ObservationType.DEFAULT,
+                        f"VectorSensor_size{OBSERVATION_SIZE}"),
+    )
+    action_spec = ActionSpec(continuous_size=len(JOINTS), discrete_branches=())
+    agents_per_area = AGENTS_PER_AREA
+    max_step = 500
+    decision_period = 1
+    sets_reward = False
+    description = ("PD-controlled ragdoll imitating a reference motion (seed 001). Observations: 13 parts x "
+                   "(local rotation 4, linear velocity 3, angular velocity 3, position from the pelvis 3) + "
+                   "phase (1). Actions: 26 PD targets. DeepMimic-style reward; env params motion (0 stand, "
+                   "1 arms, 2 squat, 3 walk), residual, push_impulse, push_interval, reward_weights, rsi.")
+
+    def __init__(self, num_areas: int, seed: int, env_params: EnvironmentParameters | None = None):
+        super().__init__(num_areas, seed, env_params)
+        n = self.num_agents
+        self.model, self.base = build_model(n)
+        self.data = mujoco.MjData(self.model)
+        self.rng = np.random.default_rng(self.seed)
+        self.ref = Reference()
+        model = self.model
+        self.timestep = float(model.opt.timestep)
+        joint = lambda i, name: model.joint(f"a{i}/{name}")  # noqa: E731
+        self.root_qpos = np.array([joint(i, "root").qposadr[0] for i in range(n)])
+        self.root_dof = np.array([joint(i, "root").dofadr[0] for i in range(n)])
+        self.joint_qpos = np.array([[joint(i, j).qposadr[0] for j in JOINTS] for i in range(n)])
+        self.joint_dof = np.array([[joint(i, j).dofadr[0] for j in JOINTS] for i in range(n)])
+        self.actuator = np.array([[model.actuator(f"a{i}/{j}").id for j in JOINTS] for i in range(n)])
+        self.agent_qpos = self.root_qpos[:, None] + np.arange(7 + len(JOINTS))  # joints follow the root
+        self.agent_dof = self.root_dof[:, None] + np.arange(6 + len(JOINTS))
+        assert (self.agent_qpos[:, 7:] == self.joint_qpos).all() and (self.agent_dof[:, 6:] == self.joint_dof).all()
+        self.parts = np.array([[model.body(f"a{i}/{b}").id for b in OBSERVED] for i in range(n)])
+        self.parents = model.body_parentid[self.parts]
+        self.pelvis = self.parts[:, 0]
+        self.torso = self.parts[:, 1]
+        self.ends = np.array([[model.geom(f"a{i}/{g}").id for g in END_EFFECTORS] for i in range(n)])
+        self.low = model.jnt_range[[[joint(i, j).id for j in JOINTS] for i in range(n)], 0]
+        self.high = model.jnt_range[[[joint(i, j).id for j in JOINTS] for i in range(n)], 1]
+        self.floor = model.geom("floor").id
+        # per geom: owning agent (-1 = floor); feet may touch the floor
+        self.geom_agent = np.full(model.ngeom, -1)
+        self.geom_is_foot = np.zeros(model.ngeom, dtype=bool)
+        for g in range(model.ngeom):
+            name = model.geom(g).name
+            if "/" in name:
+                prefix, local = name.split("/", 1)
+                self.geom_agent[g] = int(prefix[1:])
+                self.geom_is_foot[g] = local in FEET
+        # per-agent episode state
+        self.motion = np.zeros(n, dtype=np.int64)
+        self.frame = np.zeros(n, dtype=np.int64)  # index within the motion's clip
+        self.cycles = np.zeros(n, dtype=np.int64)  # walk: completed loops (stride offsets)
+        self.episode_step = np.zeros(n, dtype=np.int64)
+        self.weights = np.zeros((n, 5))
+        self.scales = np.tile(SCALES, (n, 1))
+        self.residual = np.zeros(n)
+        self.push_impulse = np.zeros(n)
+        self.push_interval = np.full(n, PUSH_INTERVAL)
+        self.max_drift = np.full(n, MAX_DRIFT)
+        self.term_sum = np.zeros((n, 5))
+        self.last_terms = np.zeros((n, 5))
+        self.last_fell = np.zeros(n, dtype=bool)
+        self.last_push = np.zeros((n, 3))  # the impulse (N s) applied in the last decision
+        self.reset()
+
+    # --- reference lookups -------------------------------------------------------------------
+    def ref_rows(self, frame: np.ndarray | None = None) -> np.ndarray:
+        """Row of every agent's current reference frame in the Reference tables."""
+        return self.ref.offset[self.motion] + (self.frame if frame is None else frame)
+
+    def anchor(self) -> np.ndarray:
+        """[n, 3]: where the reference root stands on the floor (its horizontal position)."""
+        rows = self.ref_rows()
+        anchor = self.base + np.column_stack([self.ref.qpos[rows, 0], self.ref.qpos[rows, 1], np.zeros(len(rows))])
+        walking = self.ref.stride[self.motion] > 0
+        anchor[walking, 1] = self.data.xpos[self.pelvis[walking], 1]  # the walk's reference follows
+        return anchor
+
+    # --- the task interface --------------------------------------------------------------------
+    def reset(self, mask: np.ndarray | None = None) -> None:
+        """Read the environment parameters and put the agents in mask at their reference (RSI)."""
+        agents = np.flatnonzero(self.all_agents(mask))
+        if len(agents) == 0:
+            return
+        count, get = len(agents), self.env_params.get_many
+        motion = np.rint(get("motion", 0, count)).astype(np.int64)
+        if ((motion < 0) | (motion >= len(MOTIONS))).any():
+            raise ValueError(f"environment parameter motion must be 0..{len(MOTIONS) - 1} "
+                             f"({', '.join(MOTIONS)}), got {sorted(set(motion.tolist()))}")
+        self.motion[agents] = motion
+        frames = self.ref.frames[motion]
+        rsi = get("rsi", 1, count) > 0.5
+        self.frame[agents] = np.where(rsi, (self.rng.random(count) * frames).astype(np.int64), 0)
+        self.cycles[agents] = 0
+        self.episode_step[agents] = 0
+        self.term_sum[agents] = 0.0
+        preset = np.rint(get("reward_weights", 0, count))
+        thesis = np.array([THESIS_WEIGHTS[name] for name in MOTIONS])[motion]
+        weights = np.where(preset[:, None] == 1, np.array(DEEPMIMIC_WEIGHTS), thesis)
+        scales = np.tile(SCALES, (count, 1))
+        for j, term in enumerate(("r", "v", "m", "e", "t")):
+            w, k = get(f"w_{term}", -1, count), get(f"k_{term}", -1, count)
+            weights[:, j] = np.where(w >= 0, w, weights[:, j])
+            scales[:, j] = np.where(k >= 0, k, scales[:, j])
+        self.weights[agents], self.scales[agents] = weights, scales
+        self.residual[agents] = np.maximum(get("residual", 0, count), 0.0)
+        self.push_impulse[agents] = np.maximum(get("push_impulse", 0, count), 0.0)
+        self.push_interval[agents] = np.maximum(get("push_interval", PUSH_INTERVAL, count), CONTROL_DT)
+        self.max_drift[agents] = get("max_drift", MAX_DRIFT, count)
+        rows = self.ref.offset[motion] + self.frame[agents]
+        qpos = self.ref.qpos[rows].copy()
+        qpos[:, :3] += self.base[agents]
+        walking = self.ref.stride[motion] > 0
+        qpos[walking, 1] = self.base[agents[walking], 1]
+        self.data.qpos[self.agent_qpos[agents]] = qpos
+        self.data.qvel[self.agent_dof[agents]] = self.ref.qvel[rows]
+        self.data.ctrl[self.actuator[agents]] = self.ref.joints[rows]
+        self.data.xfrc_applied[self.torso[agents]] = 0.0
+        mujoco.mj_forward(self.model, self.data)
+
+    def targets(self, action: np.ndarray) -> np.ndarray:
+        """[n, 26] PD targets (rad) from actions [n, 26] in [-1, 1] (see ``residual``), aimed at the
+        reference frame the decision leads to."""
+        span = self.high - self.low
+        absolute = self.low + (action + 1.0) * 0.5 * span
+        following = self.ref.joints[self.ref_rows((self.frame + 1) % self.ref.frames[self.motion])]
+        residual = np.clip(following + action * self.residual[:, None] * 0.5 * span, self.low, self.high)
+        return np.where(self.residual[:, None] > 0, residual, absolute)
+
+    def observe(self) -> list[np.ndarray]:
+        """[float32 [n, 170]]: see the module docstring for the order."""
+        data, n = self.data, self.num_agents
+        xquat = data.xquat[self.parts]  # [n, 13, 4]
+        local = quat_mul(quat_conj(data.xquat[self.parents]), xquat)
+        local[:, 0] = xquat[:, 0]
+        local = np.where(local[..., :1] < 0, -local, local)
+        rot = data.xmat[self.pelvis].reshape(n, 3, 3)  # pelvis frame -> world
+        pelvis_pos = data.xpos[self.pelvis]
+        angular = data.cvel[self.parts, :3]
+        offset = data.xpos[self.parts] - data.subtree_com[self.pelvis][:, None, :]
+        linear = data.cvel[self.parts, 3:] + np.cross(angular, offset)  # cvel is about the root subtree CoM
+        relative = data.xpos[self.parts] - pelvis_pos[:, None, :]
+        to_local = lambda v: np.einsum("nji,nkj->nki", rot, v)  # noqa: E731  R^T v for every part
+        position = to_local(relative)
+        position[:, 0] = [0.0, 0.0, 0.0]
+        position[:, 0, 2] = pelvis_pos[:, 2] - self.base[:, 2]
+        obs = np.concatenate([local, to_local(linear), to_local(angular), position], axis=2).reshape(n, -1)
+        phase = np.where(self.motion == 0, 0.0, self.frame / self.ref.frames[self.motion])
+        return [np.concatenate([obs, phase[:, None]], axis=1).astype(np.float32)]
+
+    def step(self, continuous: np.ndarray, discrete: np.ndarray) -> TaskStep:
+        """continuous float [n, 26] in [-1, 1] -> one decision (5 MuJoCo steps, 0.02 s) of every agent."""
+        n, data = self.num_agents, self.data
+        action = np.asarray(continuous, dtype=np.float64).reshape(n, len(JOINTS)).clip(-1.0, 1.0)
+        data.ctrl[self.actuator] = self.targets(action)
+        # pushes: at every multiple of push_interval seconds into the episode
+        elapsed = (self.episode_step + 1) * CONTROL_DT
+        due = (self.push_impulse > 0) & (np.floor(elapsed / self.push_interval + 1e-9)
+                                         > np.floor((elapsed - CONTROL_DT) / self.push_interval + 1e-9))
+        self.last_push[:] = 0.0
+        if due.any():
+            azimuth = self.rng.uniform(0.0, 2 * math.pi, int(due.sum()))
+            impulse = self.push_impulse[due, None] * np.column_stack([np.cos(azimuth), np.sin(azimuth),
+                                                                      np.zeros(len(azimuth))])
+            self.last_push[due] = impulse
+            data.xfrc_applied[self.torso[due], :3] = impulse / CONTROL_DT
+        for _ in range(SUBSTEPS):
+            mujoco.mj_step(self.model, data)
+        if due.any():
+            data.xfrc_applied[self.torso[due], :3] = 0.0
+        # advance the reference
+        frames = self.ref.frames[self.motion]
+        self.frame += 1
+        wrapped = self.frame >= frames
+        self.cycles += wrapped
+        self.frame[wrapped] = 0
+        rows = self.ref_rows()
+        terms, drift = self.compare(rows)
+        rewards = (self.weights * terms).sum(axis=1)
+        fell = self._fallen() | (drift > self.max_drift)
+        self.episode_step += 1
+        self.term_sum += terms
+        self.last_terms, self.last_fell = terms, fell
+        interrupted = ~fell & (self.episode_step >= self.max_step)
+        done = fell | interrupted
+        stats = []
+        if done.any():
+            means = self.term_sum[done] / self.episode_step[done, None]
+            for j, term in enumerate(TERMS[:4]):
+                stats += [(f"Mimic/{term}", float(v), StatsAggregationMethod.AVERAGE) for v in means[:, j].tolist()]
+            stats += [("Mimic/Fell", float(v), StatsAggregationMethod.AVERAGE) for v in fell[done].tolist()]
+        return TaskStep(rewards.astype(np.float32), done, interrupted, stats)
+
+    def compare(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reward terms [n, 5] against the reference rows, and the CoM distance [n] (m)."""
+        data, ref, n = self.data, self.ref, self.num_agents
+        local = quat_mul(quat_conj(data.xquat[self.parents]), data.xquat[self.parts])
+        local[:, 0] = data.xquat[self.pelvis]
+        rot_sq = (quat_angle(local, ref.rot[rows]) ** 2).sum(axis=1)
+        velocity = np.concatenate([data.qvel[self.joint_dof], data.qvel[self.root_dof[:, None] + np.arange(3, 6)]], axis=1)
+        vel_sq = ((velocity - ref.joint_vel[rows]) ** 2).sum(axis=1)
+        anchor = self.anchor()
+        com_error = data.subtree_com[self.pelvis] - (anchor + ref.com[rows])
+        com_sq = (com_error**2).sum(axis=1)
+        end_sq = ((data.geom_xpos[self.ends] - (anchor[:, None, :] + ref.end[rows])) ** 2).sum(axis=(1, 2))
+        pelvis_speed = data.cvel[self.pelvis, 4] + np.cross(data.cvel[self.pelvis, :3], data.xpos[self.pelvis]
+                                                            - data.subtree_com[self.pelvis])[:, 1]
+        speed_sq = (pelvis_speed - ref.speed[self.motion]) ** 2
+        return reward_terms(rot_sq, vel_sq, com_sq, end_sq, speed_sq, self.scales), np.sqrt(com_sq)
+
+    def _fallen(self) -> np.ndarray:
+        """bool [n]: a geom other than a foot touches the floor."""
+        fallen = np.zeros(self.num_agents, dtype=bool)
+        ncon = self.data.ncon
+        if ncon:
+            pairs = self.data.contact.geom[:ncon]
+            other = np.where(pairs[:, 0] == self.floor, pairs[:, 1], pairs[:, 0])
+            floor = (pairs == self.floor).any(axis=1)
+            bad = floor & ~self.geom_is_foot[other] & (self.geom_agent[other] >= 0)
+            fallen[self.geom_agent[other[bad]]] = True
+        return fallen
+
+
+# --- scripted evaluation ------------------------------------------------------------------------
+# Per motion, ``trials`` ragdolls start at the clip's first frame (no RSI) and act for 10 s of
+# simulated time (500 decisions); then the standing ragdoll is pushed every PUSH_EVAL_INTERVAL s
+# with each impulse of PUSH_LADDER (N s; 70 kg: 10 N s changes the whole body's velocity by
+# 0.14 m/s), in a random horizontal direction at the torso.
+EVAL_SECONDS = 10.0
+PUSH_LADDER = (10.0, 20.0, 30.0, 40.0)
+PUSH_EVAL_INTERVAL = 2.0
+
+
+def run_trials(act, motion: int, trials: int, seed: int, push_impulse: float = 0.0,
+               push_interval: float = PUSH_EVAL_INTERVAL, residual: float = 0.0) -> dict:
+    """``trials`` episodes of EVAL_SECONDS with the policy ``act`` (float32 [n, 170] -> [n, 26]):
+    the fraction that kept their balance (no early termination) and, over every decision before a
+    trial ended, the mean of each reward term and of the reward."""
+    params = EnvironmentParameters()
+    for key, value in (("motion", motion), ("rsi", 0), ("push_impulse", push_impulse),
+                       ("push_interval", push_interval), ("residual", residual)):
+        params.set(key, lambda value=value: value)
+    task = MimicTask(-(-trials // AGENTS_PER_AREA), seed, params)
+    n = task.num_agents
+    running = np.ones(n, dtype=bool)
+    kept = np.zeros(n, dtype=bool)
+    terms, reward, steps = np.zeros((n, 5)), np.zeros(n), np.zeros(n)
+    for _ in range(round(EVAL_SECONDS / CONTROL_DT)):
+        result = task.step(np.asarray(act(task.observe()[0]), dtype=np.float64), np.zeros((n, 0)))
+        terms[running] += task.last_terms[running]
+        reward[running] += result.rewards[running]
+        steps[running] += 1
+        kept |= running & result.interrupted
+        running &= ~result.done
+        if not running.any():
+            break
+    kept, terms, reward, steps = kept[:trials], terms[:trials], reward[:trials], steps[:trials]
+    total = steps.sum()
+    out = {"trials": int(trials), "balance_kept": float(kept.mean()), "mean_seconds": float(steps.mean() * CONTROL_DT),
+           "mean_reward": float(reward.sum() / total)}
+    out.update({term: float(terms[:, j].sum() / total) for j, term in enumerate(TERMS)})
+    return out
+
+
+def evaluate(act, seed: int = 0, episodes: int = 32, residual: float = 0.0) -> dict:
+    """The scripted evaluation: every motion unpushed, then standing under the PUSH_LADDER."""
+    motions = {name: run_trials(act, m, episodes, seed, residual=residual) for m, name in enumerate(MOTIONS)}
+    pushed = {f"{impulse:g}": run_trials(act, 0, episodes, seed, impulse, PUSH_EVAL_INTERVAL, residual)
+              for impulse in PUSH_LADDER}
+    return {"motions": motions, "pushed_stand": pushed, "push_interval_s": PUSH_EVAL_INTERVAL}
+
+
+def format_table(results: dict) -> str:
+    """Markdown: per policy and motion the balance-kept rate and the mean reward terms; then the
+    standing balance under pushes."""
+    lines = ["| policy | motion | trials | balance kept 10 s | mean s | r_r | r_v | r_m | r_e | r_t | mean reward |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, result in results.items():
+        for motion, s in result["motions"].items():
+            lines.append(f"| {name} | {motion} | {s['trials']} | {s['balance_kept']:.3f} | {s['mean_seconds']:.2f} | "
+                         f"{s['r_r']:.3f} | {s['r_v']:.3f} | {s['r_m']:.3f} | {s['r_e']:.3f} | {s['r_t']:.3f} | "
+                         f"{s['mean_reward']:.3f} |")
+    first = next(iter(results.values()))
+    lines += ["", f"Standing, balance kept for 10 s under a push every {first['push_interval_s']:g} s (random "
+              "horizontal direction, at the torso), per impulse:",
+              "| policy | " + " | ".join(f"{k} N s" for k in first["pushed_stand"]) + " |",
+              "|---|" + "---|" * len(first["pushed_stand"])]
+    for name, result in results.items():
+        lines.append(f"| {name} | " + " | ".join(f"{s['balance_kept']:.3f}" for s in result["pushed_stand"].values()) + " |")
+    return "\n".join(lines)
