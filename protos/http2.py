@@ -18,8 +18,10 @@ method over cleartext HTTP/2 ("prior knowledge"): the connection preface, SETTIN
 PING (+ACK), WINDOW_UPDATE flow control in both directions, HEADERS/CONTINUATION with
 HPACK-decoded request headers (``hpack``), DATA split to the peer's frame size, RST_STREAM,
 GOAWAY, and gRPC's length-prefixed messages with trailers. Responses never use HPACK's dynamic
-table, so they are a few constant bytes. Several connections are served (a simulator that
-reconnects); calls are handed out in arrival order. The framing helpers here are shared with
+table, so they are a few constant bytes. Up to ``MAX_CONNECTIONS`` connections are open at
+once, but calls are taken from one of them only, the session's (the first whose call the
+trainer took); while it lives another client's request is refused, and once it has closed the
+next connection takes over (a simulator that reconnects). The framing helpers here are shared with
 the simulator's client, unity_stub_env/http2_client.py.
 
     transport = Http2Transport("127.0.0.1", 5005, path=b"/pkg.Service/Method", max_message_bytes=...)
