@@ -41,6 +41,7 @@ from trainer.config.support import goal_conditioning_note
 from trainer.curriculum import EnvironmentParameterManager
 from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
 from trainer.errors import ConfigError, ResultsWriteError, UnityCommunicatorStoppedError, UserError
+from trainer.protocol.codec import NON_FINITE_STAT
 from trainer.rollout import AgentTracker, concat_masks
 from trainer.stop import EXIT_STOPPED, STOP
 
@@ -382,6 +383,14 @@ class RunState:
                     router.queue(cid, payload)
             self.pending_reset = self.pending_reset or must_reset
 
+    def count_dropped(self, results: list[StepResult]) -> None:
+        """Agent steps the codec left out for NaN/Inf (trainer/protocol/codec.py), summed into
+        each brain's summaries."""
+        for res in results:
+            for behavior, dropped in res.dropped.items():
+                self.reporter.add(brain_name_of(behavior)[0], NON_FINITE_STAT, dropped.count,
+                                  StatsAggregationMethod.SUM)
+
     # ------------------------------------------------------------------ side channels
     def side_channel_in(self, results: list[StepResult]) -> None:
         brains = None  # the brains of this step, once some simulator sent stats
@@ -567,6 +576,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
             STOP.check()  # stop signals take effect here, between steps (trainer.stop)
             state.recorder.observe(results)
             state.side_channel_in(results)
+            state.count_dropped(results)
             trajectories: list = []
             actions, decided = state.decide(results)
             if state.finished:
