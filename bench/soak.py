@@ -10,10 +10,11 @@ simulators get SIGKILL (a node failure) and the run continues with ``--resume``.
 trainer gets SIGTERM (a graceful stop, exit 75). Reported:
 
 * RSS of the trainer process (and of all simulators) sampled every ``--sample`` seconds, as a
-  per-minute table and, per trainer process, the least-squares slope in MB per hour over its
-  samples after a warm-up of 60 s (the trend; target: none beyond noise);
+  per-minute table and, per trainer process, the least-squares slope in MB per hour over the
+  second half of its life (at least its first minute left out: buffers and allocator pools fill
+  first; the trend, target: none beyond noise);
 * kills of simulators and of the trainer, and the restarts the trainer logged (each simulator
-  kill must be followed by one restart);
+  kill must be followed by one restart, except one the trainer's own kill or stop overtook);
 * TensorBoard summary labels, read back from the event files with TensorBoard's purge rule (a
   SessionLog START at step s drops what earlier files wrote at steps >= s, which a resumed run
   writes): **counted twice** = labels present more than once, **lost** = multiples of
@@ -167,6 +168,8 @@ def main(argv: list[str] | None = None) -> int:
     trainer_kill_on = args.trainer_kill[1] > 0
     next_trainer_kill = t0 + rng.uniform(*args.trainer_kill) if trainer_kill_on else float("inf")
     sim_kills = trainer_kills = 0
+    sim_kill_times: list[float] = []
+    trainer_end_times: list[float] = []  # kills of the trainer, and the final stop
     early_exits = []
     while time.monotonic() < end:
         now = time.monotonic()
@@ -182,6 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         if now >= next_sim_kill and sims:
             os.kill(rng.choice(sorted(sims.values())), signal.SIGKILL)
             sim_kills += 1
+            sim_kill_times.append(now)
             next_sim_kill = now + rng.uniform(*args.sim_kill)
         if now >= next_trainer_kill:
             trainer.kill()  # SIGKILL, and its simulators with it: a node failure
@@ -189,11 +193,13 @@ def main(argv: list[str] | None = None) -> int:
             for pid in simulator_pids(ports).values():
                 os.kill(pid, signal.SIGKILL)
             trainer_kills += 1
+            trainer_end_times.append(now)
             time.sleep(1.0)
             trainer = start(resume=True)
             segments.append({"pid": trainer.pid, "samples": []})
             next_trainer_kill = time.monotonic() + rng.uniform(*args.trainer_kill)
         time.sleep(args.sample)
+    trainer_end_times.append(time.monotonic())
     trainer.send_signal(signal.SIGTERM)
     try:
         final_code = trainer.wait(timeout=120)
@@ -214,11 +220,17 @@ def main(argv: list[str] | None = None) -> int:
         final = json.loads(status_path.read_text()).get("Basic", {}).get("final_checkpoint")
         final_steps = final and final["steps"]
     tracebacks = text.count("Traceback")
+    # a simulator killed shortly before the trainer is killed or stopped may never be noticed
+    overtaken = sum(any(0 <= e - k < 10.0 for e in trainer_end_times) for k in sim_kill_times)
 
     slopes = []
-    for seg in segments:
-        tail = [(t, v) for t, v in seg["samples"] if t - seg["samples"][0][0] >= 60] if seg["samples"] else []
-        slopes.append(slope_mb_per_hour(tail))
+    for seg in segments:  # the second half of each process's life, and not its first minute
+        samples = seg["samples"]
+        if not samples:
+            slopes.append(None)
+            continue
+        start = max(samples[0][0] + 60, (samples[0][0] + samples[-1][0]) / 2)
+        slopes.append(slope_mb_per_hour([(t, v) for t, v in samples if t >= start]))
     print(f"# soak {dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M} UTC: {args.minutes:g} min, "
           f"{args.num_envs} simulators, stub:basic")
     print("\n| minute | trainer RSS MB | simulators RSS MB (sum) |\n|---|---|---|")
@@ -233,9 +245,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {minute} | {sum(tr) / len(tr) if tr else float('nan'):.1f} | "
               f"{sum(si) / len(si) if si else float('nan'):.1f} |")
     print()
-    print(f"* trainer processes: {len(segments)}; RSS slope after 60 s warm-up, MB/h: "
+    print(f"* trainer processes: {len(segments)}; RSS slope over the second half of each, MB/h: "
           + ", ".join("n/a" if s is None else f"{s:+.1f}" for s in slopes))
-    print(f"* simulator kills: {sim_kills}; restarts logged: {restarts}; trainer kills: {trainer_kills}; "
+    print(f"* simulator kills: {sim_kills} ({overtaken} within 10 s before a trainer kill or the final stop); "
+          f"restarts logged: {restarts}; trainer kills: {trainer_kills}; "
           f"unexpected trainer exits: {early_exits or 'none'}; final exit code: {final_code}")
     print(f"* resumed at steps: {resumed_at or 'none'}; final checkpoint step: {final_steps}")
     print(f"* summary labels: {len(labels)} (every {args.summary_freq} up to {top}); counted twice: {twice}; "
@@ -243,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
     record = {
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "args": vars(args),
         "segments": [{"pid": s["pid"], "samples": s["samples"]} for s in segments], "sim_rss": sim_samples,
-        "slopes_mb_per_h": slopes, "sim_kills": sim_kills, "restarts": restarts, "trainer_kills": trainer_kills,
+        "slopes_mb_per_h": slopes, "sim_kills": sim_kills, "overtaken": overtaken, "restarts": restarts, "trainer_kills": trainer_kills,
         "early_exits": early_exits, "final_exit": final_code, "resumed_at": resumed_at,
         "final_steps": final_steps, "labels": len(labels), "twice": twice, "lost": lost, "tracebacks": tracebacks,
     }

@@ -291,11 +291,20 @@ def main(argv: list[str] | None = None) -> int:
         if not needed.exists():
             print(f"missing {needed}: run ./scripts/ensure_interop_venv.sh / install the project")
             return 2
-    # both trainers start from byte-compiled modules: pip compiled the wheels, and the venv
-    # script compiles our editable tree (again here, in case it changed since)
-    subprocess.run([str(REPO / "scripts" / "ensure_venv.sh")], check=True)
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)  # neither trainer may see the other's packages
+    # both trainers start from byte-compiled modules: pip compiled the wheels, and the venv
+    # script compiles our editable tree (again here, in case it changed since). A git worktree
+    # that shares another tree's venv must not re-point its editable install: it only compiles
+    # its own tree, and "ours" runs that tree (PYTHONPATH).
+    installed = subprocess.run([str(OUR_PYTHON), "-c", "import trainer; print(trainer.__file__)"], env=env,
+                               capture_output=True, text=True).stdout.strip()
+    if installed and Path(installed).resolve().parents[1] == REPO.resolve():
+        subprocess.run([str(REPO / "scripts" / "ensure_venv.sh")], check=True)
+    else:
+        subprocess.run([str(OUR_PYTHON), "-m", "compileall", "-q", *(str(REPO / p) for p in
+                        ("trainer", "unity_stub_env", "protos"))], check=True, stdout=subprocess.DEVNULL)
+    ours_env = {**env, "PYTHONPATH": str(REPO)}
     reference_env = env
     if args.reference_tree:
         tree = args.reference_tree.resolve()
@@ -314,7 +323,7 @@ def main(argv: list[str] | None = None) -> int:
             pair_folder = folder / f"pair{index}" if args.pairs > 1 else folder
             runs = {
                 "ours": lambda f=pair_folder: train("ours", OUR_LEARN, f"stub:{args.task}", config_path,
-                                                    f / "ours", args, behavior, env),
+                                                    f / "ours", args, behavior, ours_env),
                 "reference": (lambda f=pair_folder: train("reference", OUR_LEARN, f"stub:{args.task}", config_path,
                                                           f / "reference", args, behavior, reference_env))
                 if args.reference_tree else

@@ -40,7 +40,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from trainer.protocol import http2  # noqa: E402
+from protos import http2  # noqa: E402
 from unity_stub_env.http2_client import request_headers  # noqa: E402
 from trainer.protocol.server import EXCHANGE_PATH, MAX_MESSAGE_BYTES, _GrpcioTransport  # noqa: E402
 

@@ -18,8 +18,10 @@ method over cleartext HTTP/2 ("prior knowledge"): the connection preface, SETTIN
 PING (+ACK), WINDOW_UPDATE flow control in both directions, HEADERS/CONTINUATION with
 HPACK-decoded request headers (``hpack``), DATA split to the peer's frame size, RST_STREAM,
 GOAWAY, and gRPC's length-prefixed messages with trailers. Responses never use HPACK's dynamic
-table, so they are a few constant bytes. Several connections are served (a simulator that
-reconnects); calls are handed out in arrival order. The framing helpers here are shared with
+table, so they are a few constant bytes. Up to ``MAX_CONNECTIONS`` connections are open at
+once, but calls are taken from one of them only, the session's (the first whose call the
+trainer took); while it lives another client's request is refused, and once it has closed the
+next connection takes over (a simulator that reconnects). The framing helpers here are shared with
 the simulator's client, unity_stub_env/http2_client.py.
 
     transport = Http2Transport("127.0.0.1", 5005, path=b"/pkg.Service/Method", max_message_bytes=...)
@@ -283,10 +285,7 @@ class _Connection:
         try:
             self._parse(calls)
         except Http2Error as error:
-            logger.warning("Closing the connection from %s: %s", self.peer, error)
-            self.out += frame(GOAWAY, 0, 0, struct.pack(">II", self.last_stream, error.code) + str(error).encode()[:200])
-            self.flush()
-            self.drop(str(error))
+            self.close_with(error.code, str(error))
             return []
         self.flush(wait=False)
         return calls
@@ -671,7 +670,9 @@ class _Connection:
         self.drop("the server closed")
 
     def close_with(self, code: int, why: str) -> None:
-        """A connection the server ends on its own account: one log line, GOAWAY, closed."""
+        """A connection error or one the server ends on its own account: one log line, GOAWAY
+        (sent as far as the socket takes it now: a client that does not read cannot make the
+        trainer wait), closed."""
         logger.warning("Closing the connection from %s: %s", self.peer, why)
         if not self.closed:
             self.out += frame(GOAWAY, 0, 0, struct.pack(">II", self.last_stream, code) + why.encode()[:200])
@@ -795,8 +796,10 @@ class Http2Transport:
             if call.cancelled:  # dropped before the trainer took it: as if dropped after
                 self.client_gone = True
             return True
-        call.fail(GRPC_FAILED_PRECONDITION, refusal)
-        connection.close_with(NO_ERROR, refusal)
+        call.answered = True
+        if not call.cancelled:
+            connection.send_error(call.stream_id, GRPC_FAILED_PRECONDITION, refusal, flush=False)
+        connection.close_with(NO_ERROR, refusal)  # never waits on a client that does not read
         return False
 
     def _sweep(self) -> None:

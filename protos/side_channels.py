@@ -121,6 +121,19 @@ def encode_env_sampler(key: str, sampler_type: str, seed: int, params) -> bytes:
     return writer.getvalue()
 
 
+def encode_env_sequences(key: str, codes, num_labels: int) -> list[bytes]:
+    """Label sequences as plain float parameters a Unity game reads with
+    ``EnvironmentParameters.GetWithDefault`` (docs/protocol.md §4.4): ``KEY.count``,
+    ``KEY.length``, ``KEY.labels`` (how many labels the model has), then ``KEY.i`` for
+    i = k * length + t, the code of label t of sequence k. codes: int [count, length]."""
+    codes = np.asarray(codes).reshape(len(codes), -1)
+    count, length = codes.shape
+    payloads = [encode_env_float(f"{key}.count", count), encode_env_float(f"{key}.length", length),
+                encode_env_float(f"{key}.labels", num_labels)]
+    payloads += [encode_env_float(f"{key}.{i}", float(code)) for i, code in enumerate(codes.ravel().tolist())]
+    return payloads
+
+
 @dataclass(frozen=True)
 class EnvParameter:
     """A decoded environment parameter as Unity holds it.
@@ -273,7 +286,7 @@ __all__ = [
     "ENGINE_CONFIG_CHANNEL_ID", "ENVIRONMENT_PARAMETERS_CHANNEL_ID", "FLOAT_PROPERTIES_CHANNEL_ID",
     "STATS_CHANNEL_ID", "TRAINING_ANALYTICS_CHANNEL_ID", "pack_messages", "unpack_messages",
     "PayloadWriter", "PayloadReader", "EngineConfigType", "encode_engine_config",
-    "decode_engine_config", "SAMPLER_TYPES", "encode_env_float", "encode_env_sampler",
+    "decode_engine_config", "SAMPLER_TYPES", "encode_env_float", "encode_env_sampler", "encode_env_sequences",
     "EnvParameter", "decode_env_parameter", "encode_float_property", "decode_float_property",
     "encode_stat", "decode_stat", "IncomingSideChannelData",
     "SideChannelRouter",

@@ -148,3 +148,7 @@ class StepResult:
     specs: dict[str, BehaviorSpec] = field(default_factory=dict)  # specs first seen in this message
     steps: dict[str, tuple[DecisionSteps, TerminalSteps]] = field(default_factory=dict)
     side_channel: bytes = b""
+    # per behavior of ``specs``: each observation's compression ("none" or "png"), as its first agent sent it
+    compressions: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    # behaviors some of whose agents were left out for NaN/Inf: {behavior: trainer.protocol.codec.Dropped}
+    dropped: dict = field(default_factory=dict)

@@ -1,4 +1,4 @@
-"""One brain's training state in a run: its PPO trainer, settings, summaries and checkpoints.
+"""One brain's training state in a run: its trainer (PPO or SAC), settings, summaries and checkpoints.
 
 The run loop (trainer/run.py) owns the simulators and the data flow; a ``BehaviorRunner`` owns
 what belongs to one brain name: when to summarise, when to checkpoint, what to write where.
@@ -63,6 +63,34 @@ def hyperparams_from_settings(settings) -> PPOHyperparams:
     )
 
 
+def sac_hyperparams_from_settings(settings) -> "SACHyperparams":
+    """Map a ``trainer_type: sac`` behavior's TrainerSettings onto the SAC room's dataclass."""
+    from trainer.sac.hyperparams import SACHyperparams
+
+    h = settings.hyperparameters
+    n = settings.network_settings
+    return SACHyperparams(
+        batch_size=h.batch_size, buffer_size=h.buffer_size, learning_rate=h.learning_rate,
+        learning_rate_schedule=h.learning_rate_schedule, buffer_init_steps=h.buffer_init_steps, tau=h.tau,
+        steps_per_update=h.steps_per_update, save_replay_buffer=h.save_replay_buffer,
+        init_entcoef=h.init_entcoef, reward_signal_steps_per_update=h.reward_signal_steps_per_update,
+        max_steps=settings.max_steps, normalize=n.normalize, hidden_units=n.hidden_units,
+        num_layers=n.num_layers, vis_encode_type=n.vis_encode_type, deterministic=n.deterministic,
+        memory_size=n.memory.memory_size if n.memory is not None else 0,
+        reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
+    )
+
+
+def make_trainer(brain: str, spec: BehaviorSpec, settings, seed: int, device: str, use_numpy_update: bool):
+    """The trainer of ``settings.trainer_type`` (the config refuses the types not trained here)."""
+    if settings.trainer_type == "sac":
+        from trainer.sac.trainer import SACTrainer
+
+        return SACTrainer(brain, spec, sac_hyperparams_from_settings(settings), seed=seed, device=device)
+    return PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
+                      use_numpy_update=use_numpy_update)
+
+
 @dataclass
 class CheckpointPaths:
     run_dir: str
@@ -91,6 +119,11 @@ class CheckpointPaths:
         return os.path.join(self.folder, "checkpoint.pt")
 
     @property
+    def replay_buffer(self) -> str:
+        """SAC's replay buffer (save_replay_buffer), rewritten with every checkpoint."""
+        return os.path.join(self.folder, "last_replay_buffer.npz")
+
+    @property
     def final_onnx(self) -> str:
         return os.path.join(self.run_dir, f"{self.brain}.onnx")
 
@@ -100,7 +133,7 @@ class BehaviorRunner:
     brain: str
     spec: BehaviorSpec
     settings: object  # TrainerSettings
-    trainer: PPOTrainer
+    trainer: PPOTrainer  # or trainer.sac.trainer.SACTrainer (same interface)
     paths: CheckpointPaths
     training: bool
     next_summary: int = 0
@@ -115,8 +148,7 @@ class BehaviorRunner:
     def create(cls, brain: str, spec: BehaviorSpec, settings, run_dir: str, seed: int, device: str,
                training: bool, use_numpy_update: bool = True) -> "BehaviorRunner":
         """``use_numpy_update``: MLAGENTS_LIKE_NUMPY_UPDATE (trainer.config.env_vars)."""
-        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
-                             use_numpy_update=use_numpy_update)
+        trainer = make_trainer(brain, spec, settings, seed, device, use_numpy_update)
         runner = cls(brain, spec, settings, trainer, CheckpointPaths(run_dir, brain), training)
         os.makedirs(runner.paths.folder, exist_ok=True)
         return runner
@@ -140,9 +172,18 @@ class BehaviorRunner:
                 f"spec differs): {err}. Use a checkpoint of the same configuration or start fresh with --force."
             ) from None
         if reset_step:
-            self.trainer.step = 0
-        elif "Summaries" in state:
-            self.resumed_next_summary = int(state["Summaries"]["next_step"])
+            self.trainer.restart_counters()
+        else:
+            if "Summaries" in state:
+                self.resumed_next_summary = int(state["Summaries"]["next_step"])
+            if self.saves_replay_buffer and self.training:  # --resume continues the replay buffer it saved
+                if os.path.isfile(self.paths.replay_buffer):
+                    self.trainer.load_replay_buffer(self.paths.replay_buffer)
+                    logger.info("Loaded the replay buffer of behavior %s (%d experiences) from %s.",
+                                self.brain, len(self.trainer.buffer), self.paths.replay_buffer)
+                else:
+                    logger.warning("No replay buffer at %s: behavior %s starts with an empty one.",
+                                   self.paths.replay_buffer, self.brain)
         logger.info("Loaded %s for behavior %s at step %d.", path, self.brain, self.trainer.step)
 
     def resume(self, status: TrainingStatus) -> None:
@@ -248,6 +289,10 @@ class BehaviorRunner:
         return max(1, s.checkpoint_interval)
 
     @property
+    def saves_replay_buffer(self) -> bool:
+        return bool(getattr(self.settings.hyperparameters, "save_replay_buffer", False))
+
+    @property
     def max_steps(self) -> int:
         return self.settings.max_steps
 
@@ -297,6 +342,8 @@ class BehaviorRunner:
         crash_points.reached("checkpoint.onnx")
         save_checkpoint(self.paths.latest, state)
         crash_points.reached("checkpoint.latest")
+        if self.saves_replay_buffer:  # after checkpoint.pt: a kill in between resumes with the older buffer
+            self.trainer.save_replay_buffer(self.paths.replay_buffer)
         logger.info("Exported %s", onnx_path)
         reward = float(np.mean(self.returns_since_checkpoint)) if self.returns_since_checkpoint else None
         self.returns_since_checkpoint = []

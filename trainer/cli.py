@@ -99,6 +99,10 @@ def main(argv: list[str] | None = None) -> int:
         from trainer.config.support import check_supported
 
         check_supported(options)  # before the results folder or a simulator exists
+        if options.check:  # docs/mirror.md: no simulator, no results folder
+            from trainer.config.spec_check import run_check
+
+            return run_check(options)
         print(LOGO)
         for line in version_lines():
             logger.info(line)
@@ -107,6 +111,10 @@ def main(argv: list[str] | None = None) -> int:
         STOP.install()
         if hasattr(signal, "SIGXFSZ"):  # past `ulimit -f` a write fails with EFBIG (one message), no core dump
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        if options.capture_spec is not None:
+            from trainer.run import capture_spec
+
+            return capture_spec(options, env_vars)
         from trainer.run import run_training
 
         return run_training(options, env_vars)

@@ -27,12 +27,13 @@ from protos import side_channels as sc
 from protos.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
 from trainer import crash_points
 from trainer.artifacts.atomic import WRITE_ERRNOS, results_write_error
+from trainer.artifacts.behaviors import BehaviorRecorder
 from trainer.artifacts.console import ConsoleWriter, ProgressLine
 from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, GaugeWriter, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
 from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
-from trainer.config.env_params import ConstantSampler
+from trainer.config.env_params import ConstantSampler, HmmSampler, hmm_model, hmm_sequences
 from trainer.config.env_vars import EnvVars
 from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
@@ -41,6 +42,7 @@ from trainer.curriculum import EnvironmentParameterManager
 from trainer.distributed import RankLost, Ranks
 from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
 from trainer.errors import ConfigError, ResultsWriteError, UnityCommunicatorStoppedError, UserError
+from trainer.protocol.codec import NON_FINITE_STAT
 from trainer.rollout import AgentTracker, concat_masks
 from trainer.stop import EXIT_STOPPED, STOP
 
@@ -56,7 +58,7 @@ def run_dir_of(options) -> str:
     return os.path.join(ck.results_dir, ck.run_id)
 
 
-_STARTUP_FILES = re.compile(r"configuration\.yaml|run_logs/(timers\.json|training_status\.json|Player-\d+\.log)")
+_STARTUP_FILES = re.compile(r"configuration\.yaml|run_logs/(timers\.json|training_status\.json|behaviors\.json|Player-\d+\.log)")
 
 
 def only_startup_files(run_dir: str) -> bool:
@@ -137,6 +139,12 @@ def warn_if_not_loopback(bind: str, ports: str) -> None:
 def environment_parameter_messages(manager: EnvironmentParameterManager) -> list[tuple]:
     msgs = []
     for key, sampler in manager.current_samplers().items():
+        if isinstance(sampler, HmmSampler):
+            codes = hmm_sequences(sampler)
+            num_labels = hmm_model(sampler).num_labels
+            msgs += [(sc.ENVIRONMENT_PARAMETERS_CHANNEL_ID, payload)
+                     for payload in sc.encode_env_sequences(key, codes, num_labels)]
+            continue
         if isinstance(sampler, ConstantSampler):
             payload = sc.encode_env_float(key, sampler.value)
         elif sampler.sampler_type == "uniform":
@@ -168,6 +176,7 @@ class RunState:
     progress: ProgressLine
     routers: list[sc.SideChannelRouter]
     env_vars: EnvVars = field(default_factory=EnvVars)
+    recorder: BehaviorRecorder | None = None  # run_logs/behaviors.json
     ranks: Ranks = field(default_factory=Ranks)  # data-parallel ranks (trainer/distributed.py)
     runners: dict[str, BehaviorRunner] = field(default_factory=dict)
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
@@ -382,6 +391,14 @@ class RunState:
                     router.queue(cid, payload)
             self.pending_reset = self.pending_reset or must_reset
 
+    def count_dropped(self, results: list[StepResult]) -> None:
+        """Agent steps the codec left out for NaN/Inf (trainer/protocol/codec.py), summed into
+        each brain's summaries."""
+        for res in results:
+            for behavior, dropped in res.dropped.items():
+                self.reporter.add(brain_name_of(behavior)[0], NON_FINITE_STAT, dropped.count,
+                                  StatsAggregationMethod.SUM)
+
     # ------------------------------------------------------------------ side channels
     def side_channel_in(self, results: list[StepResult]) -> None:
         brains = None  # the brains of this step, once some simulator sent stats
@@ -389,6 +406,8 @@ class RunState:
             if not res.side_channel:
                 continue
             incoming = self.routers[env_id].dispatch(res.side_channel)
+            if incoming.stats and self.recorder is not None:
+                self.recorder.observe_stats(key for key, _, _ in incoming.stats)
             if incoming.stats:
                 if brains is None:
                     brains = {brain_name_of(b)[0] for r in results for b in r.steps}
@@ -462,19 +481,13 @@ def check_torch_device(device: str | None) -> None:
         ) from error
 
 
-def run_training(options, env_vars: EnvVars | None = None) -> int:
-    """Train (or run inference) as configured; ``env_vars``: the MLAGENTS_LIKE_* choices read at
-    start (trainer/cli.py; the defaults if None). Returns the process exit code."""
-    env_vars = env_vars or EnvVars()
-    crash_points.arm(env_vars.crash_at)
-    ck = options.checkpoint_settings
+def pool_settings_of(options, env_vars: EnvVars) -> PoolSettings:
     env = options.env_settings
     rank, world = env_vars.ranks.rank, env_vars.ranks.world_size
-    main = rank == 0  # data-parallel ranks: rank 0 alone writes files (trainer/distributed.py)
     if world > 1 and not env.env_path:
         raise UserError(f"{world} data-parallel ranks need --env: each rank launches its own simulators "
                         "(the Unity Editor is one environment).")
-    pool_settings = PoolSettings(
+    return PoolSettings(
         env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
         num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,
         bind=env.bind, no_graphics=options.engine_settings.no_graphics,
@@ -484,6 +497,61 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         restarts_rate_limit_period_s=env.restarts_rate_limit_period_s, debug=options.debug,
         spin_wait_s=env_vars.spin_wait_s, transport=env_vars.transport, first_worker=rank * env.num_envs,
     )
+
+
+def behavior_recorder(options) -> BehaviorRecorder:
+    env = options.env_settings
+    return BehaviorRecorder(env.num_areas, env.env_path or "editor", tuple(options.environment_parameters))
+
+
+CAPTURE_STEPS = 20  # exchanges --capture-spec watches before it writes the file
+
+
+def capture_spec(options, env_vars: EnvVars | None = None, steps: int = CAPTURE_STEPS) -> int:
+    """``--capture-spec FILE``: connect to the simulator(s), step ``steps`` times with zero
+    actions, write what was seen to FILE (docs/mirror.md) and exit without training."""
+    env_vars = env_vars or EnvVars()
+    path = options.capture_spec
+    params = EnvironmentParameterManager(options.environment_parameters, options.env_settings.seed, {})
+    side_channel = sc.pack_messages(environment_parameter_messages(params)
+                                    + engine_config_messages(options.engine_settings))
+    pool = EnvPool(pool_settings_of(options, env_vars), initial_side_channel=lambda: side_channel)
+    recorder = behavior_recorder(options)
+    routers = make_routers(pool.num_envs)
+    try:
+        pool.start()
+        results = pool.reset(side_channel)
+        for _ in range(steps):
+            STOP.check()
+            recorder.observe(results)
+            for router, res in zip(routers, results):
+                if res.side_channel:
+                    recorder.observe_stats(key for key, _, _ in router.dispatch(res.side_channel).stats)
+            results = pool.step([{} for _ in results], b"").results
+        recorder.observe(results)
+    except KeyboardInterrupt:
+        logger.info("Stopped before the capture finished; nothing written.")
+        return EXIT_STOPPED
+    finally:
+        pool.close()
+    if not recorder.write(path):
+        raise UserError(f"--capture-spec: the simulator sent no agent in {steps} steps, so there is no "
+                        "behavior spec to record; check that the scene's agents request decisions.")
+    spec = recorder.spec_file()
+    logger.info("Wrote the specs of %d behavior(s) to %s: %s", len(spec.behaviors), path,
+                ", ".join(f"{b.name} ({b.agents} agents)" for b in spec.behaviors))
+    return 0
+
+
+def run_training(options, env_vars: EnvVars | None = None) -> int:
+    """Train (or run inference) as configured; ``env_vars``: the MLAGENTS_LIKE_* choices read at
+    start (trainer/cli.py; the defaults if None). Returns the process exit code."""
+    env_vars = env_vars or EnvVars()
+    crash_points.arm(env_vars.crash_at)
+    ck = options.checkpoint_settings
+    env = options.env_settings
+    pool_settings = pool_settings_of(options, env_vars)
+    main = env_vars.ranks.rank == 0  # data-parallel ranks: rank 0 alone writes files (trainer/distributed.py)
     state: RunState | None = None
     # resolves --env first: a wrong path must not leave a results folder that blocks the rerun
     pool = EnvPool(pool_settings, initial_side_channel=lambda: state.initial_side_channel())
@@ -508,7 +576,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         write_run_options(options, run_dir)
     reporter = StatsReporter(writers)
     state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
-                     make_routers(env.num_envs), env_vars)
+                     make_routers(env.num_envs), env_vars, behavior_recorder(options))
     for line in params.describe():
         logger.info(line)
     stopped = write_failed = False
@@ -527,7 +595,9 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
             results = pool.reset(state.initial_side_channel())
         while True:
             STOP.check()  # stop signals take effect here, between steps (trainer.stop)
+            state.recorder.observe(results)
             state.side_channel_in(results)
+            state.count_dropped(results)
             trajectories: list = []
             actions, decided = state.decide(results)
             if state.finished:
@@ -591,7 +661,8 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
 
 
 def finish_run(state: RunState) -> None:
-    """Final checkpoint + ONNX per brain, training_status.json, timers.json, configuration.yaml."""
+    """Final checkpoint + ONNX per brain, training_status.json, timers.json, configuration.yaml,
+    behaviors.json."""
     if not state.ranks.is_main:
         return  # rank 0 writes every file
     run_dir = state.run_dir
@@ -600,6 +671,8 @@ def finish_run(state: RunState) -> None:
             runner.save_checkpoint(state.status, final=True)
     if not state.options.checkpoint_settings.inference:  # inference leaves the training record alone
         state.save_status()
+    if state.recorder is not None:
+        state.recorder.write(os.path.join(run_dir, "run_logs", "behaviors.json"))
     state.timers.write(os.path.join(run_dir, "run_logs", "timers.json"))
     state.reporter.close()
     write_run_options(state.options, run_dir)

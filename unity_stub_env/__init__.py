@@ -6,15 +6,18 @@ tasks imports MuJoCo (~0.3 s), which the trainer must not pay when it only check
 before launching the stub.
 
 This module is the stub's public API for other packages (the trainer uses nothing else):
-``TASK_NAMES``, ``spin_wait_args``, ``transport_args`` and ``write_player_launcher`` (cheap), ``TASKS`` and
-``make_task`` (loaded on first use)."""
+``TASK_NAMES``, ``MIRROR_TASK``, ``spin_wait_args``, ``transport_args`` and ``write_player_launcher`` (cheap), ``TASKS`` and
+``make_task`` (loaded on first use), and the HMM tools the trainer's ``hmm`` sampler uses: ``Hmm``,
+``HmmError``, ``parse_corpus``, ``train_hmm`` (``unity_stub_env.hmm``, loaded on first use)."""
 from __future__ import annotations
 
 from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher
-from unity_stub_env.task_names import TASK_NAMES
+from unity_stub_env.task_names import MIRROR_TASK, TASK_NAMES
 
-__all__ = ["TASK_NAMES", "TASKS", "make_task", "spin_wait_args", "transport_args", "write_player_launcher"]
+__all__ = ["MIRROR_TASK", "TASK_NAMES", "TASKS", "make_task", "spin_wait_args", "transport_args", "write_player_launcher",
+           "Hmm", "HmmError", "parse_corpus", "train_hmm"]
 _LAZY = ("TASKS", "make_task")
+_LAZY_HMM = {"Hmm": "Hmm", "HmmError": "HmmError", "parse_corpus": "parse_corpus", "train_hmm": "train"}
 
 
 def __getattr__(name: str):
@@ -22,4 +25,8 @@ def __getattr__(name: str):
         from unity_stub_env import tasks
 
         return getattr(tasks, name)
+    if name in _LAZY_HMM:
+        from unity_stub_env import hmm
+
+        return getattr(hmm, _LAZY_HMM[name])
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -45,7 +45,7 @@ class Academy:
         self.decision_period = int(decision_period or task.decision_period)
         if self.decision_period < 1:
             raise ValueError(f"decision_period must be >= 1, got {self.decision_period}")
-        self.behavior_key = f"{task.behavior_name}?team=0"
+        self.behavior_key = f"{task.behavior_name}?team={task.team_id}"
         # one counter per process (Unity's is static): pass the same one to every academy
         self.episode_counter = episode_counter or EpisodeIdCounter()
         n = task.num_agents
@@ -74,7 +74,8 @@ class Academy:
         task = self.task
         decisions = encode_agent_infos(
             task.observation_specs, task.observe(), self.pending_reward, self.episode_ids,
-            done=False, action_mask=task.action_mask(),
+            done=False, action_mask=task.action_mask(), compressions=task.observation_compressions,
+            group_ids=task.group_ids(),
         )
         infos = self.pending_done_infos + decisions
         self.pending_done_infos = EncodedInfos()
@@ -149,9 +150,11 @@ class Academy:
         """Queue the terminal infos of ``done`` [n] agents, then start their next episode."""
         task = self.task
         observations = [obs[done] for obs in task.observe()]
+        groups = task.group_ids()
         self.pending_done_infos += encode_agent_infos(
             task.observation_specs, observations, self.pending_reward[done], self.episode_ids[done],
-            done=True, interrupted=interrupted[done],
+            done=True, interrupted=interrupted[done], compressions=task.observation_compressions,
+            group_ids=None if groups is None else groups[done],
         )
         finished = int(done.sum())
         self.completed_episodes += finished

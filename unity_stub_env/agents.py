@@ -6,6 +6,7 @@ start, for any agent, takes the next integer, so an id never repeats within one 
 from __future__ import annotations
 
 import functools
+import io
 from typing import Sequence
 
 import numpy as np
@@ -23,6 +24,8 @@ from protos.types import ActionSpec, ObservationSpec
 # id 10 (varints), action_mask 11 (packed bools), observations 13
 _REWARD, _ID = wire.tag(7, wire.I32), wire.tag(10, wire.VARINT)
 _DONE_TRUE, _MAX_STEP_TRUE = wire.tag(8, wire.VARINT) + b"\x01", wire.tag(9, wire.VARINT) + b"\x01"
+_GROUP_ID = wire.tag(14, wire.VARINT)
+_PNG = 1  # ObservationProto.compression_type
 
 
 class EncodedInfos:
@@ -59,6 +62,8 @@ def encode_agent_infos(
     done: bool,
     interrupted: np.ndarray | None = None,
     action_mask: np.ndarray | None = None,
+    compressions: Sequence[str] | None = None,
+    group_ids: np.ndarray | None = None,
 ) -> EncodedInfos:
     """AgentInfoProtos as Unity's ``PutObservations`` fills them, serialized as Unity's C#
     protobuf writes them: fields in number order, the proto3 defaults left out (a zero reward,
@@ -69,6 +74,11 @@ def encode_agent_infos(
     byte that any of them needs; when records differ (a zero reward beside others, ids of
     several varint lengths, some agents interrupted), a byte mask then drops what each record
     leaves out, which also joins the records of different lengths.
+
+    ``compressions`` (per observation, "none" or "png") and ``group_ids`` (int [count], 0 = no
+    group) are what the ``mirror`` task needs: PNG cameras and agent groups (AgentInfoProto
+    field 14). Records with them are joined one by one (``_encode_few``): a PNG's length differs
+    from agent to agent.
     """
     count = len(episode_ids)
     if count == 0:
@@ -79,8 +89,10 @@ def encode_agent_infos(
                 else None)
     masks = (np.asarray(action_mask, dtype=bool).reshape(count, -1).astype(np.uint8)
              if action_mask is not None else None)
-    if count < wire.MIN_MATRIX_ROWS:
-        return _encode_few(observation_specs, observations, rewards, ids, done, max_step, masks)
+    pngs = tuple(c == "png" for c in compressions) if compressions is not None and "png" in compressions else None
+    if count < wire.MIN_MATRIX_ROWS or pngs is not None or group_ids is not None:
+        return _encode_few(observation_specs, observations, rewards, ids, done, max_step, masks, pngs,
+                           group_ids)
     parts: list = []
     keep: list = []  # per part: None (every record has it), bool [count] or bool [count, width]
 
@@ -129,12 +141,18 @@ def encode_agent_infos(
     return EncodedInfos(records[present].tobytes(), count)
 
 
-def _encode_few(observation_specs, observations, rewards, ids, done, max_step, masks) -> EncodedInfos:
-    """``encode_agent_infos`` for a handful of agents: each record's bytes joined in a loop."""
-    frames = [_observation_frame(spec) for spec in observation_specs]
-    flat_obs = [np.ascontiguousarray(np.asarray(obs, dtype="<f4").reshape(len(ids), -1)) for obs in observations]
+def _encode_few(observation_specs, observations, rewards, ids, done, max_step, masks, pngs=None,
+                group_ids=None) -> EncodedInfos:
+    """``encode_agent_infos`` for a handful of agents (or with PNG cameras or groups): each
+    record's bytes joined in a loop."""
+    pngs = pngs or (False,) * len(observation_specs)
+    frames = [None if png else _observation_frame(spec) for spec, png in zip(observation_specs, pngs)]
+    flat_obs = [_png_fields(spec, obs) if png else
+                np.ascontiguousarray(np.asarray(obs, dtype="<f4").reshape(len(ids), -1))
+                for spec, obs, png in zip(observation_specs, observations, pngs)]
     mask_prefix = wire.len_prefix(11, masks.shape[1]) if masks is not None and masks.shape[1] else None
     flags = max_step.tolist() if max_step is not None else [False] * len(ids)
+    groups = [0] * len(ids) if group_ids is None else np.asarray(group_ids, dtype=np.int64).tolist()
     records = []
     for row, (reward, episode_id, interrupted) in enumerate(zip(rewards.tolist(), ids.tolist(), flags)):
         parts = [_REWARD, rewards[row].tobytes()] if reward != 0 else []
@@ -146,8 +164,10 @@ def _encode_few(observation_specs, observations, rewards, ids, done, max_step, m
             parts += [_ID, wire.varint(episode_id)]
         if mask_prefix is not None:
             parts += [mask_prefix, masks[row].tobytes()]
-        for (head, tail), obs in zip(frames, flat_obs):
-            parts += [head, obs[row].tobytes(), tail]
+        for frame, obs in zip(frames, flat_obs):
+            parts += [obs[row]] if frame is None else [frame[0], obs[row].tobytes(), frame[1]]
+        if groups[row]:
+            parts += [_GROUP_ID, wire.varint(groups[row])]
         records.append(wire.field(1, b"".join(parts)))
     return EncodedInfos(b"".join(records), len(ids))
 
@@ -167,6 +187,50 @@ def _observation_frame(spec: ObservationSpec) -> tuple[bytes, bytes]:
         name = spec.name.encode()
         tail += wire.len_prefix(8, len(name)) + name
     return wire.len_prefix(13, len(head) + 4 * size + len(tail)) + head, tail
+
+
+def _png_fields(spec: ObservationSpec, observations: np.ndarray) -> list[bytes]:
+    """One serialized PNG ObservationProto (field 13) per agent for a C x H x W camera in [0, 1]
+    (docs/protocol.md §3.3): 1 channel as a gray RGB PNG, 3 as RGB, any other count as RGB PNGs
+    of 3 channels each, concatenated, with ``compressed_channel_mapping`` (-1 for padding)."""
+    channels = spec.shape[0]
+    mapping = [] if channels in (1, 3) else [c if c < channels else -1 for c in range(3 * -(-channels // 3))]
+    shape = b"".join(wire.varint(int(d)) for d in spec.shape)
+    props = b"".join(wire.varint(int(p)) for p in spec.dimension_property)
+    before = wire.len_prefix(1, len(shape)) + shape + wire.tag(2, wire.VARINT) + wire.varint(_PNG)
+    after = b""
+    if mapping:
+        packed = b"".join(wire.varint(m) for m in mapping)  # packed int32: -1 takes 10 bytes
+        after += wire.len_prefix(5, len(packed)) + packed
+    if props:
+        after += wire.len_prefix(6, len(props)) + props
+    if int(spec.observation_type):
+        after += wire.tag(7, wire.VARINT) + wire.varint(int(spec.observation_type))
+    if spec.name:
+        after += wire.field(8, spec.name.encode())
+    pixels = np.clip(np.rint(np.asarray(observations, dtype=np.float32) * 255.0), 0, 255).astype(np.uint8)
+    fields = []
+    for agent in pixels:
+        data = b"".join(_png_bytes(agent[c:c + 3]) for c in range(0, channels, 3))
+        fields.append(wire.field(13, before + wire.field(3, data) + after))
+    return fields
+
+
+def _png_bytes(chw: np.ndarray) -> bytes:
+    """One RGB PNG file of uint8 [c <= 3, H, W], as Unity's EncodeToPNG writes cameras: one
+    channel is repeated in all three (readers average them back to gray), missing channels of a
+    group are zero (the mapping drops them)."""
+    from PIL import Image
+
+    if chw.shape[0] == 1:
+        rgb = np.repeat(chw, 3, axis=0)
+    else:
+        rgb = np.zeros((3, *chw.shape[1:]), dtype=np.uint8)
+        rgb[: chw.shape[0]] = chw
+    image = Image.fromarray(np.ascontiguousarray(np.moveaxis(rgb, 0, -1)), mode="RGB")
+    out = io.BytesIO()
+    image.save(out, format="PNG", compress_level=1)
+    return out.getvalue()
 
 
 class EpisodeIdCounter:

@@ -3,9 +3,13 @@
     unity-stub-env --task NAME --mlagents-port P [-nographics] [-batchmode] [-logFile F]
                    [--num-areas N] [--seed S] [--decision-period K] [--connect-timeout T]
                    [--spin-wait-ms MS] [--transport {http2,grpcio}]
+    unity-stub-env --task mirror --spec behaviors.json --mlagents-port P    (or --task mirror=FILE)
     unity-stub-env --list
     unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
                    [--evaluate-option KEY=VALUE]
+    unity-stub-env hmm train CORPUS -o MODEL [--states N --restarts R --method fast|baum-welch --seed S]
+    unity-stub-env hmm sample MODEL -n N --length L [--seed S]      (see unity_stub_env.hmm)
+    unity-stub-env creature --kind quadruped|biped|lsystem --seed S [--mjcf OUT.xml]
 
 Unity flags the stub does not know are ignored, as a player ignores them. Exit codes:
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
@@ -22,10 +26,12 @@ import resource
 import signal
 import sys
 
+from protos.spec_file import SpecFile, SpecFileError
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter, build_brain_parameters
 from unity_stub_env.communicator import TRANSPORTS, RpcCommunicator, SessionEnd, SideChannelState, encode_stats
 from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher
+from unity_stub_env.task_names import MIRROR_TASK
 from unity_stub_env.tasks import TASKS, EnvironmentParameters, make_task
 
 logger = logging.getLogger("unity_stub_env")
@@ -41,6 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--task", action="append",
                         help=f"task to simulate: {', '.join(sorted(TASKS))}; repeat it (or separate "
                              "names with commas) for a scene with several behaviors")
+    parser.add_argument("--spec", metavar="FILE", default=None,
+                        help="--task mirror: the behaviors.json to replay (a run's run_logs/behaviors.json "
+                             "or mlagents-like-learn --capture-spec FILE; docs/mirror.md)")
     parser.add_argument("--mlagents-port", type=int, default=None,
                         help="port of the trainer's gRPC server (a Unity player does not train without it)")
     parser.add_argument("--num-areas", type=int, default=None, help="override the trainer's num_areas")
@@ -98,16 +107,41 @@ def _configure_logging(log_file: str | None) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args, unknown = build_parser().parse_known_args(_normalise_unity_flags(list(sys.argv[1:] if argv is None else argv)))
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "hmm":  # the HMM tools: unity-stub-env hmm train|sample ...
+        from unity_stub_env.hmm import main as hmm_main
+
+        return hmm_main(argv[1:])
+    if argv and argv[0] == "creature":  # a generated creature's MJCF (unity_stub_env.creatures)
+        from unity_stub_env.creatures import main as creature_main
+
+        return creature_main(argv[1:])
+    args, unknown = build_parser().parse_known_args(_normalise_unity_flags(argv))
     if args.list:
         for task_class in TASKS.values():
             print(task_class.describe())
+        print(f"{MIRROR_TASK}: replays the behaviors of a behaviors.json given with --spec FILE (or "
+              f"--task {MIRROR_TASK}=FILE) with learnable synthetic dynamics; see docs/mirror.md.")
         return 0
     args.tasks = [name for value in (args.task or []) for name in value.split(",") if name]
-    unknown_tasks = [name for name in args.tasks if name not in TASKS]
+    for index, name in enumerate(args.tasks):  # --task mirror=FILE is --task mirror --spec FILE
+        if name.startswith(MIRROR_TASK + "="):
+            args.tasks[index], args.spec = MIRROR_TASK, name[len(MIRROR_TASK) + 1:]
+    args.mirror = None
+    if MIRROR_TASK in args.tasks:
+        if args.spec is None:
+            print("unity-stub-env: --task mirror needs --spec FILE (a behaviors.json, docs/mirror.md).",
+                  file=sys.stderr)
+            return 2
+        try:
+            args.mirror = SpecFile.load(args.spec)
+        except SpecFileError as error:
+            print(f"unity-stub-env: {error}", file=sys.stderr)
+            return 2
+    unknown_tasks = [name for name in args.tasks if name not in TASKS and name != MIRROR_TASK]
     if not args.tasks or unknown_tasks:
         print(f"unity-stub-env: unknown or missing --task {', '.join(unknown_tasks) or repr(None)}; "
-              f"known tasks: {', '.join(sorted(TASKS))} (see --list).", file=sys.stderr)
+              f"known tasks: {', '.join(sorted(TASKS))}, {MIRROR_TASK} (with --spec; see --list).", file=sys.stderr)
         return 2
     if len(set(args.tasks)) != len(args.tasks):
         print(f"unity-stub-env: each --task may appear once (got {', '.join(args.tasks)}): two copies "
@@ -117,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unity-stub-env: --spin-wait-ms must be 0 or more, got {args.spin_wait_ms:g}.", file=sys.stderr)
         return 2
     if args.evaluate:
-        if len(args.tasks) != 1:
+        if len(args.tasks) != 1 or args.mirror is not None:
             print("unity-stub-env: --evaluate takes exactly one --task.", file=sys.stderr)
             return 2
         from unity_stub_env.evaluate import run as run_evaluation
@@ -125,8 +159,9 @@ def main(argv: list[str] | None = None) -> int:
         return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path,
                               args.evaluate_options)
     if args.write_launcher is not None:
-        path = write_player_launcher(args.write_launcher, args.tasks,
-                                     extra_args=spin_wait_args(args.spin_wait_ms / 1e3) + transport_args(args.transport))
+        spec = ["--spec", os.path.abspath(args.spec)] if args.mirror is not None else []
+        path = write_player_launcher(args.write_launcher, args.tasks, extra_args=spin_wait_args(
+            args.spin_wait_ms / 1e3) + transport_args(args.transport) + spec)
         print(f"{path}  (use --env {path.with_suffix('')})")
         return 0
     if args.mlagents_port is None:
@@ -183,12 +218,19 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
         raise SessionEnd("The trainer sent QUIT.", 0)
     counter = EpisodeIdCounter()  # process-wide, like Unity's
     academies = []
+    tasks = []
     for index, name in enumerate(args.tasks):  # one behavior per task, like a scene with several
-        task = make_task(name, num_areas=num_areas, seed=seed + index, env_params=env_params)
+        if name == MIRROR_TASK:  # one task per behavior of the spec file
+            from unity_stub_env.tasks.mirror import mirror_tasks
+
+            tasks += mirror_tasks(args.mirror, num_areas, seed + index, env_params)
+        else:
+            tasks.append(make_task(name, num_areas=num_areas, seed=seed + index, env_params=env_params))
+    for task in tasks:
         academy = Academy(task, args.decision_period, counter)  # construction is the first RESET
         academies.append((academy, build_brain_parameters(academy.behavior_key, task.action_spec)))
         logger.info("Task %s: behavior %s, %d agents (%d areas), seed %d, decision period %d",
-                    task.name, academy.behavior_key, task.num_agents, num_areas, seed + index,
+                    task.name, academy.behavior_key, task.num_agents, num_areas, task.seed,
                     academy.decision_period)
     exchanges = 0
     while True:

@@ -22,7 +22,7 @@ import h2.events
 import h2.exceptions
 import h2.settings
 
-from trainer.protocol import http2
+from protos import http2
 from protos.http2 import (
     GRPC_INTERNAL,
     GRPC_RESOURCE_EXHAUSTED,
@@ -68,6 +68,10 @@ class H2Connection:
         self.streams: dict[int, _Stream] = {}
         self.pending: dict[int, IncomingCall] = {}
         self.closed = False
+        # what Http2Transport's connection bookkeeping reads (docs/protocol.md: limits); h2 checks
+        # the preface itself, so the slow-loris sweep treats it as seen
+        self.opened_at = self.active_at = time.monotonic()
+        self.settings_seen = True
         self.conn = h2.connection.H2Connection(config=_CONFIG)
         self.conn.local_settings = h2.settings.Settings(client=False, initial_values={
             h2.settings.SettingCodes.INITIAL_WINDOW_SIZE: MAX_WINDOW,
@@ -251,6 +255,19 @@ class H2Connection:
             self.sock.close()
         except OSError:
             pass
+
+    def idle(self) -> bool:
+        return not self.pending and not self.streams
+
+    def close_with(self, code: int, why: str) -> None:
+        """Close with GOAWAY carrying ``code`` (h2 error code), as ``http2`` connections do."""
+        if not self.closed:
+            try:
+                self.conn.close_connection(error_code=code, additional_data=why.encode()[:200])
+                self.flush()
+            except Exception:  # noqa: BLE001 - best effort on a connection being dropped
+                pass
+        self.drop(why)
 
     def shutdown(self, grace: float) -> None:
         if self.closed:

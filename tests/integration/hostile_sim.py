@@ -160,9 +160,13 @@ def main() -> int:
         if case == "disconnect_mid_exchange":
             channel.sock.sendall(b"\x00\x00\x20\x01\x04\x00\x00\x00\x7f")  # half a HEADERS frame
             os._exit(5)  # gone mid-call, as a crashing player
-        if case == "handshake_twice" or case == "normal":
+        if case in ("handshake_twice", "normal", "nan_every_step"):
             for k in range(100000):
-                channel.call(step([agent(1, obs=(0.1, 0.2))], params() if k == 0 else None), timeout=30)
+                infos = [agent(1, obs=(0.1, k % 7 / 7))]
+                if case == "nan_every_step":  # beside it, agents whose reward or observation is not finite
+                    infos += [agent(2, reward=float("nan")), agent(3, obs=(math.inf, 0.0)),
+                              agent(4, obs=(0.0, -math.inf), done=True)]
+                channel.call(step(infos, params() if k == 0 else None), timeout=30)
         channel.call(hostile, timeout=30)
         channel.call(step([agent()]), timeout=30)  # the trainer should have stopped before this
     except CallError:

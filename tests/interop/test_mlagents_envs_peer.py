@@ -34,8 +34,18 @@ DOCUMENTED_SPECS = {
                                "name": "VectorSensor_size170"}],
         "action_spec": {"continuous_size": 26, "discrete_branches": []},
     }},
+    "runner": {"Runner?team=0": {
+        "observation_specs": [{"shape": [29], "dimension_property": [1], "observation_type": 0,
+                               "name": "VectorSensor_size29"}],
+        "action_spec": {"continuous_size": 1, "discrete_branches": []},
+    }},
+    "creature": {"Creature?team=0": {  # the default creature: quadruped, creature_seed 0
+        "observation_specs": [{"shape": [298], "dimension_property": [1], "observation_type": 0,
+                               "name": "VectorSensor_size298"}],
+        "action_spec": {"continuous_size": 34, "discrete_branches": []},
+    }},
 }
-AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14, "mimic": 8}  # agents per area; one area by default
+AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14, "mimic": 8, "runner": 4, "creature": 1}  # agents per area; one area by default
 STEPS = 500
 
 

@@ -55,7 +55,7 @@ def mask_fault(infos: Sequence, branches: Sequence[int]) -> bool:
     option, or masking every option of a branch (docs/protocol.md §3.1)."""
     total = sum(branches)
     bounds = np.cumsum([0, *branches])
-    for info in infos:
+    for info in infos if total else ():  # without discrete actions masks are not read
         if info.done or not len(info.action_mask):
             continue
         if len(info.action_mask) != total:

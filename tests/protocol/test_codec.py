@@ -117,21 +117,29 @@ def test_group_ids_and_group_rewards():
     np.testing.assert_array_equal(terminal.group_reward, [0.0])
 
 
+@pytest.mark.parametrize("agents", [3, 70])  # the protobuf path and the records path
 @pytest.mark.parametrize(
-    "kwargs, field",
-    [
-        (dict(reward=float("nan")), "reward"),
-        (dict(group_reward=float("inf")), "group_reward"),
-        (dict(obs=[[1.0, float("nan")]]), "observation 0"),
-    ],
+    "kwargs",
+    [dict(reward=float("nan")), dict(group_reward=float("inf")), dict(obs=[[1.0, float("nan")]]),
+     dict(obs=[[float("-inf"), 0.0]], done=True)],
 )
-def test_nan_or_inf_is_a_protocol_error_naming_behavior_field_and_agent(kwargs, field):
+def test_agents_with_nan_or_inf_are_left_out_and_counted(kwargs, agents):
+    """They never reach the networks; the simulator is still owed their actions (by position)."""
     kwargs.setdefault("obs", [[1.0, 2.0]])
-    infos = [agent_info(1, obs=[[0.0, 0.0]]), agent_info(42, **kwargs)]
-    with pytest.raises(ProtocolError) as err:
-        codec.decode_rl_output(output_with({"Walker?team=0": infos}, [brain_params("Walker?team=0", 1)]), {})
-    message = str(err.value)
-    assert "Walker?team=0" in message and field in message and "agent id 42" in message
+    infos = [agent_info(k, obs=[[float(k), 0.0]]) for k in range(agents - 2)]
+    infos[1:1] = [agent_info(42, **kwargs)]
+    infos.append(agent_info(7, obs=[[7.0, 7.0]], done=True))
+    message = Message()
+    message.header.status = 200
+    message.unity_output.CopyFrom(output_with({"Walker?team=0": infos}, [brain_params("Walker?team=0", 1)]))
+    result = codec.decode_message(message.SerializeToString(), {}).result
+    decision, terminal = result.steps["Walker?team=0"]
+    assert decision.agent_id.tolist() == list(range(agents - 2)) and terminal.agent_id.tolist() == [7]
+    assert np.isfinite(decision.obs[0]).all() and np.isfinite(decision.reward).all()
+    dropped = result.dropped["Walker?team=0"]
+    deciding = agents - 2 + (0 if kwargs.get("done") else 1)
+    assert (dropped.count, dropped.deciding) == (1, deciding)
+    assert dropped.kept.tolist() == [p for p in range(deciding) if p != 1 or kwargs.get("done")]
 
 
 # ------------------------------------------------------------------ action masks
@@ -434,7 +442,7 @@ def test_a_few_agents_decode_to_their_hand_written_values():
     assert len(terminal) == 0
 
 
-@pytest.mark.parametrize("case", ["nan_reward", "inf_group_reward", "inf_obs", "short_obs"])
+@pytest.mark.parametrize("case", ["short_obs"])
 def test_a_bad_agent_among_few_is_named(case):
     spec = BehaviorSpec((ObservationSpec((3,), (P.NONE,), ObservationType.DEFAULT, "a"),), ActionSpec(1, ()))
     kwargs = {"nan_reward": {"reward": float("nan")}, "inf_group_reward": {"group_reward": float("-inf")},

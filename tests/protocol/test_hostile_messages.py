@@ -26,7 +26,7 @@ from protos import side_channels as sc
 from protos.communicator_objects import unity_message_pb2
 from protos.errors import ProtocolError
 from protos.types import StatsAggregationMethod
-from tests.protocol.conftest import agent_info, brain_params
+from tests.protocol.conftest import agent_info, brain_params, port  # noqa: F401 (port: a fixture)
 from tests.protocol.test_codec_properties import NAMES, behaviors, brain_parameters, patched
 from trainer.protocol import codec
 
@@ -69,6 +69,8 @@ def _same(a, b) -> None:
         assert a.result is None and b.result is None
         return
     assert a.result.specs == b.result.specs and set(a.result.steps) == set(b.result.steps)
+    assert {k: (d.count, d.deciding, d.kept.tolist()) for k, d in a.result.dropped.items()} == \
+        {k: (d.count, d.deciding, d.kept.tolist()) for k, d in b.result.dropped.items()}
     for name in a.result.steps:
         for x, y in zip(a.result.steps[name], b.result.steps[name]):
             for field in ("reward", "agent_id", "group_id", "group_reward", "interrupted"):
@@ -136,7 +138,7 @@ def test_hostile_specs_and_images_stay_within_a_memory_limit():
         import resource, sys
         from protos.communicator_objects import unity_message_pb2, observation_pb2
         from protos.errors import ProtocolError
-        from tests.protocol.conftest import agent_info, brain_params
+        from tests.protocol.conftest import agent_info, brain_params, port  # noqa: F401 (port: a fixture)
         from trainer.protocol import codec
 
         def vm_bytes():
@@ -219,3 +221,33 @@ def test_mutated_or_random_side_channel_data_is_decoded_or_a_protocol_error(draw
     except ProtocolError:
         return
     assert all(isinstance(key, str) for key, _, _ in incoming.stats)
+
+
+# ------------------------------------------------------------------ NaN/Inf agents, end to end
+def test_agents_with_nan_are_left_out_and_the_simulator_still_gets_an_action_per_agent(port):
+    """Over a real connection: the trainer sees only the finite agents and answers them; the
+    simulator gets one action per deciding agent it sent, zeros where it sent NaN."""
+    from tests.protocol.conftest import ScriptedUnity, m1, m2, rl_message
+    from protos.types import ActionTuple
+    from trainer.protocol.server import UnityEndpoint
+
+    name = "W?team=0"
+    infos = [agent_info(1, obs=[[0.5]]), agent_info(2, obs=[[float("nan")]]), agent_info(3, obs=[[0.25]]),
+             agent_info(4, obs=[[1.0]], reward=float("inf"), done=True)]
+    sim = ScriptedUnity(port, [m1(), m2(), rl_message({name: infos}, [brain_params(name, 2)])])
+    endpoint = UnityEndpoint(port, timeout_wait=10, transport="http2")
+    endpoint.start()
+    sim.start()
+    try:
+        endpoint.handshake(seed=0, num_areas=1)
+        result = endpoint.reset()
+        decision, terminal = result.steps[name]
+        assert decision.agent_id.tolist() == [1, 3] and len(terminal) == 0
+        assert result.dropped[name].count == 2
+        endpoint.send_step({name: ActionTuple(np.array([[0.5, 0.5], [-0.5, -0.5]], np.float32),
+                                              np.zeros((2, 0), np.int32))})
+    finally:
+        endpoint.close()
+        sim.finish()
+    answered = sim.responses[-1].unity_input.rl_input.agent_actions[name].value
+    assert [list(a.continuous_actions) for a in answered] == [[0.5, 0.5], [0.0, 0.0], [-0.5, -0.5]]

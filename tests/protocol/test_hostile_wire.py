@@ -363,3 +363,30 @@ def test_random_and_mutated_frames_as_the_first_client_end_in_a_call_or_a_closed
             good.close()
     finally:
         transport.close(grace=0.05)
+
+
+@pytest.mark.timeout(20)  # refusing it used to wait up to 30 s in sendall for the intruder to read
+def test_refusing_an_intruder_that_does_not_read_never_blocks_the_trainer(transport, monkeypatch):
+    monkeypatch.setattr(http2, "MAX_UNSENT", 64 << 20)  # keep it connected while its buffers fill
+    good = GoodClient(transport)
+    assert good.call(b"m1") == b"ok"
+    intruder = socket.socket()
+    intruder.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    intruder.connect(("127.0.0.1", transport.port))
+    intruder.sendall(PREAMBLE)
+    intruder.settimeout(5)
+    pings = frame(PING, 0, 0, b"\0" * 8) * 4000
+    for _ in range(2000):  # until the server holds acknowledgements the socket would not take
+        intruder.sendall(pings)
+        transport.poll()
+        held = [c for c in transport._connections.values() if c is not transport.session]
+        if held and held[0].out:
+            break
+    assert held and held[0].out
+    intruder.sendall(request(1))
+    for _ in range(5):
+        assert transport.take(0.02) is None
+    assert list(transport._connections.values()) == [transport.session]
+    assert good.call(b"m2", b"served") == b"served"
+    intruder.close()
+    good.close()

@@ -16,7 +16,9 @@ from unity_stub_env.tasks.mimic import (
     SCALES,
     XML_PATH,
     MimicTask,
+    cross,
     quat_angle,
+    quat_mul,
     reward_terms,
     run_trials,
 )
@@ -93,6 +95,17 @@ def test_reward_terms_and_quaternion_angles_against_hand_computed_values():
     about_x = np.array([math.cos(half), math.sin(half), 0.0, 0.0])  # 90 degrees about x
     assert quat_angle(about_x, np.array([1.0, 0, 0, 0])) == pytest.approx(math.pi / 2)
     assert quat_angle(about_x, -about_x) == pytest.approx(0.0, abs=1e-6)  # q and -q: one rotation
+
+
+def test_quaternion_product_and_cross_product_match_mujoco_and_numpy():
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(3, 13, 4)), rng.normal(size=(3, 13, 4))
+    product = quat_mul(a, b)
+    for index in np.ndindex(3, 13):
+        expected = np.zeros(4)
+        mujoco.mju_mulQuat(expected, a[index], b[index])
+        np.testing.assert_allclose(product[index], expected, atol=1e-12)
+    np.testing.assert_allclose(cross(a[..., :3], b[..., 1:]), np.cross(a[..., :3], b[..., 1:]), atol=1e-12)
 
 
 def test_reward_is_the_weighted_sum_with_the_thesis_or_the_deepmimic_weights():

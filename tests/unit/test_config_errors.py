@@ -85,10 +85,25 @@ def test_impossible_values(tmp_path, block, path, fragment):
     assert fragment in message
 
 
-def test_sac_and_poca_are_refused_clearly(tmp_path):
-    for trainer_type in ("sac", "poca"):
-        message = error_for(tmp_path, f"behaviors:\n  A: {{trainer_type: {trainer_type}}}\n")
-        assert "behaviors.A.trainer_type" in message and "PPO only" in message
+def test_poca_is_refused_clearly(tmp_path):
+    message = error_for(tmp_path, "behaviors:\n  A: {trainer_type: poca}\n")
+    assert "behaviors.A.trainer_type" in message and "ppo and sac only" in message
+
+
+def test_sac_keys_are_checked(tmp_path):
+    message = error_for(tmp_path, "behaviors:\n  A: {trainer_type: sac, hyperparameters: {beta: 0.1}}\n")
+    assert "Unknown key 'behaviors.A.hyperparameters.beta'" in message
+    message = error_for(tmp_path, "behaviors:\n  A: {trainer_type: sac, hyperparameters: {taw: 0.1}}\n")
+    assert "Did you mean 'tau'?" in message
+    message = error_for(tmp_path, "behaviors:\n  A: {trainer_type: sac, hyperparameters: {tau: 1.5}}\n")
+    assert "behaviors.A.hyperparameters.tau" in message and "(0, 1]" in message
+    message = error_for(tmp_path, "behaviors:\n  A: {trainer_type: sac, hyperparameters: {save_replay_buffer: 3}}\n")
+    assert "behaviors.A.hyperparameters.save_replay_buffer" in message and "true or false" in message
+    message = error_for(tmp_path, "behaviors:\n  A: {trainer_type: sac, hyperparameters: {steps_per_update: 0}}\n")
+    assert "behaviors.A.hyperparameters.steps_per_update" in message
+    message = error_for(tmp_path, "behaviors:\n  A: {trainer_type: sac, hyperparameters: {batch_size: 64, "
+                                  "buffer_size: 32}}\n")
+    assert "must not exceed" in message
 
 
 def test_unknown_trainer_type_suggests(tmp_path):

@@ -94,8 +94,14 @@ def test_legacy_without_trainer_is_an_error(tmp_path):
 def test_legacy_values_go_through_strict_checks(tmp_path):
     with pytest.raises(ConfigError, match="behaviors.A.hyperparameters.lambd"):
         load_text(tmp_path, "A: {trainer: ppo, lambd: 2.0}\n")
-    with pytest.raises(ConfigError, match="PPO only"):
-        load_text(tmp_path, "A: {trainer: sac}\n")
+    with pytest.raises(ConfigError, match="ppo and sac only"):
+        load_text(tmp_path, "A: {trainer: poca}\n")
+
+
+def test_legacy_sac_keys_go_to_sac_hyperparameters(tmp_path):
+    options = load_text(tmp_path, "A: {trainer: sac, tau: 0.01, steps_per_update: 10, buffer_size: 1000, lambd: 0.9}\n")
+    hp = options.behaviors["A"].hyperparameters
+    assert (hp.tau, hp.steps_per_update, hp.buffer_size, hp.reward_signal_steps_per_update) == (0.01, 10.0, 1000, 10.0)
 
 
 def test_mid_era_curriculum_and_parameter_randomization(tmp_path):

@@ -45,6 +45,24 @@ def test_trainer_defaults_equal_spec_tables():
     assert ts.self_play is None and ts.behavioral_cloning is None
 
 
+def test_sac_defaults_equal_spec_table_and_round_trip(tmp_path):
+    options = load_text(tmp_path, """
+        behaviors:
+          A: {trainer_type: sac}
+          B: {trainer_type: sac, hyperparameters: {steps_per_update: 10, learning_rate_schedule: linear}}
+          C: {trainer_type: sac, hyperparameters: {steps_per_update: 10, reward_signal_steps_per_update: 2.5}}
+    """)
+    hp = options.behaviors["A"].hyperparameters
+    assert (hp.batch_size, hp.buffer_size, hp.learning_rate, hp.learning_rate_schedule) == (128, 50000, 3.0e-4, "constant")
+    assert (hp.buffer_init_steps, hp.tau, hp.steps_per_update, hp.save_replay_buffer) == (0, 0.005, 1.0, False)
+    assert (hp.init_entcoef, hp.reward_signal_steps_per_update) == (1.0, 1.0)
+    b = options.behaviors["B"].hyperparameters
+    assert (b.steps_per_update, b.reward_signal_steps_per_update, b.learning_rate_schedule) == (10.0, 10.0, "linear")
+    assert options.behaviors["C"].hyperparameters.reward_signal_steps_per_update == 2.5
+    path = write_run_options(options, str(tmp_path / "out"))
+    assert load_run_options(path).behaviors == options.behaviors
+
+
 def test_env_engine_checkpoint_defaults_equal_cli_table():
     env = EnvSettings()
     assert (env.env_path, env.env_args, env.base_port, env.num_envs, env.num_areas) == (None, None, 5005, 1, 1)
@@ -186,7 +204,8 @@ def test_configuration_yaml_round_trip(tmp_path):
     assert reloaded.as_dict() == options.as_dict()
 
 
-@pytest.mark.parametrize("name, behavior", [("basic", "Basic"), ("ball3d", "3DBall"), ("dodge", "Dodge"), ("dodge_legacy", "Dodge")])
+@pytest.mark.parametrize("name, behavior", [("basic", "Basic"), ("ball3d", "3DBall"), ("basic_sac", "Basic"),
+                                            ("ball3d_sac", "3DBall"), ("dodge", "Dodge"), ("dodge_legacy", "Dodge")])
 def test_shipped_configs_load(name, behavior):
     options = load_run_options(os.path.join(REPO, "configs", f"{name}.yaml"))
     assert behavior in options.behaviors
@@ -228,3 +247,20 @@ def test_dodge_configs_carry_the_thesis_values_and_agree(caplog):
         assert dodge.reward_signals["extrinsic"].gamma == 0.995
         assert (dodge.max_steps, dodge.time_horizon) == (5_000_000, 1000)
     assert modern.hyperparameters == legacy.hyperparameters and modern.network_settings == legacy.network_settings
+
+
+def test_mimic_config_carries_the_thesis_values():
+    """configs/mimic.yaml: seed 001's final hyperparameters (batch 1000, buffer 20000, lr 1e-4 linear,
+    beta 5e-4, epsilon 0.2, lambd 0.95, 2 epochs, normalize, 2 x 1024, gamma 0.99, horizon 1250,
+    5e7 steps, checkpoints every 200k, summaries every 25k) and the motion parameter (0, stand)."""
+    options = load_run_options(os.path.join(REPO, "configs", "mimic.yaml"))
+    mimic = options.behaviors["Mimic"]
+    hp, net = mimic.hyperparameters, mimic.network_settings
+    assert (hp.batch_size, hp.buffer_size, hp.learning_rate, hp.beta, hp.epsilon, hp.lambd, hp.num_epoch) == (
+        1000, 20000, 1e-4, 5e-4, 0.2, 0.95, 2)
+    assert hp.learning_rate_schedule == "linear"
+    assert (net.normalize, net.num_layers, net.hidden_units) == (True, 2, 1024)
+    assert mimic.reward_signals["extrinsic"].gamma == 0.99 and mimic.reward_signals["extrinsic"].strength == 1.0
+    assert (mimic.max_steps, mimic.time_horizon, mimic.summary_freq, mimic.checkpoint_interval,
+            mimic.keep_checkpoints) == (50_000_000, 1250, 25000, 200000, 5)
+    assert set(options.environment_parameters) == {"motion"}

@@ -42,18 +42,22 @@ class ExportableActor(nn.Module):
         memories_out = None
         if self.has_memory:  # [batch, 1, m] in the graph's interface, [1, batch, m] for the LSTM
             memories = torch.transpose(inputs[-1], 0, 1)
-            mu, logits, memories_out = self.actor.heads_with_memory(observations, allowed, memories, 1)
+            encoding, memories_out = self.actor.network_body.forward_memory(observations, memories, 1)
         else:
-            mu, logits = self.actor.heads(observations, allowed)
+            encoding = self.actor.network_body(observations)
+        mu, logits = self.actor.heads_of(encoding, allowed)
         outputs = [self.actor.version_number, self.actor.memory_size_vector]
         if mu is not None:
-            sigma = torch.exp(mu * 0 + self.actor.log_sigma)
+            sigma = torch.exp(self.actor.log_sigma_of(encoding, mu))
             sample = mu + torch.randn_like(mu) * sigma
-            outputs += [
-                torch.clamp(sample, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP,
-                self.actor.continuous_act_size_vector,
-                torch.clamp(mu, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP,
-            ]
+            if self.actor.squashed:  # SAC: tanh of the sample; deterministic tanh(mu) (docs/sac.md)
+                outputs += [torch.tanh(sample), self.actor.continuous_act_size_vector, torch.tanh(mu)]
+            else:
+                outputs += [
+                    torch.clamp(sample, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP,
+                    self.actor.continuous_act_size_vector,
+                    torch.clamp(mu, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP,
+                ]
         if logits:
             probs = [torch.softmax(branch, dim=1) for branch in logits]
             outputs += [

@@ -100,6 +100,18 @@ def _add_general_flags(parser: argparse.ArgumentParser) -> None:
     add("--timeout-wait", type=int, default=60, action=_Store, help="seconds to wait for each simulator message")
     add("--bind", default="127.0.0.1", action=_Store,
         help="address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")
+    mirror = parser.add_argument_group(title="Behavior specs (docs/mirror.md)")
+    mirror.add_argument("--capture-spec", metavar="FILE", default=None, action=_Store,
+                        help="connect to --env, record its behavior specs to FILE after the first steps "
+                             "and exit without training")
+    mirror.add_argument("--check", action=_StoreTrue,
+                        help="check the trainer YAML against --spec FILE (or --env stub:mirror=FILE) and "
+                             "exit: 0 if it fits, 2 with one line per problem")
+    mirror.add_argument("--max-steps", dest="max_steps_override", type=int, metavar="N", default=None,
+                        action=_Store, help="a short run: every behavior stops at N steps and writes a summary "
+                                            "at least every N/10 steps (for CI on the mirror)")
+    mirror.add_argument("--spec", dest="spec_path", metavar="FILE", default=None, action=_Store,
+                        help="a behaviors.json (from --capture-spec or a run's run_logs) for --check")
 
 
 def _add_engine_and_torch_flags(parser: argparse.ArgumentParser) -> None:
@@ -180,6 +192,9 @@ def parse_run_options(argv: Sequence[str]) -> RunOptions:
     if env.seed == -1:
         env = dataclasses.replace(env, seed=random.randrange(10000))
         logger.debug("run seed set to %d", env.seed)
-    options = dataclasses.replace(options, checkpoint_settings=checkpoint, env_settings=env)
+    options = dataclasses.replace(options, checkpoint_settings=checkpoint, env_settings=env,
+                                  check=values["check"], spec_path=values["spec_path"],
+                                  capture_spec=values["capture_spec"],
+                                  max_steps_override=values["max_steps_override"])
     check_run_options(options)
     return options

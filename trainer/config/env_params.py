@@ -6,6 +6,7 @@ curriculum whose lesson is named after the parameter; ``configuration.yaml`` sho
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Collection, Mapping, Union
@@ -76,10 +77,35 @@ class MultiRangeUniformSampler:
         return f"MultiRangeUniform sampler: intervals={[list(pair) for pair in self.intervals]}"
 
 
-Sampler = Union[ConstantSampler, UniformSampler, GaussianSampler, MultiRangeUniformSampler]
+@dataclass(frozen=True)
+class HmmSampler:
+    """``count`` label sequences of ``length`` drawn from a hidden Markov model (seed 004's level
+    generator, ``unity_stub_env.hmm``): the model file ``model`` (written by ``unity-stub-env hmm
+    train``; a relative path is read from the working directory) or one trained on the inline
+    ``corpus`` lines with ``states`` states (fast method, 5 restarts). Drawn once per seed with the
+    alias sampler and sent as plain float parameters ``KEY.count``, ``KEY.length``, ``KEY.labels``
+    and ``KEY.0`` … ``KEY.{count*length-1}`` (label codes = positions in the model's sorted
+    labels; docs/protocol.md §4.4)."""
+
+    model: str = ""
+    corpus: tuple[str, ...] = ()
+    states: int = 5
+    length: int = 20
+    count: int = 1
+    seed: int = -1
+    sampler_type: ClassVar[str] = "hmm"
+
+    def __str__(self) -> str:
+        source = f"model={self.model}" if self.model else f"corpus of {len(self.corpus)} lines, states={self.states}"
+        return f"HMM sampler: {source}, {self.count} sequence(s) of length {self.length}"
+
+
+MAX_HMM_VALUES = 100_000  # count * length: each value is one side-channel message of ~20 bytes
+
+Sampler = Union[ConstantSampler, UniformSampler, GaussianSampler, MultiRangeUniformSampler, HmmSampler]
 SAMPLER_TYPES: dict[str, type] = {
     cls.sampler_type: cls
-    for cls in (UniformSampler, GaussianSampler, MultiRangeUniformSampler, ConstantSampler)
+    for cls in (UniformSampler, GaussianSampler, MultiRangeUniformSampler, ConstantSampler, HmmSampler)
 }
 MEASURES = ("progress", "reward")
 
@@ -128,8 +154,10 @@ def structure_sampler(raw: Any, path: str) -> Sampler:
     kind = to_choice(raw["sampler_type"], join_path(path, "sampler_type"), tuple(SAMPLER_TYPES))
     params_path = join_path(path, "sampler_parameters")
     params = require_mapping(raw.get("sampler_parameters"), params_path)
-    hooks = {"intervals": _structure_intervals}
+    hooks = {"intervals": _structure_intervals, "corpus": _structure_corpus}
     sampler = structure(SAMPLER_TYPES[kind], params, params_path, hooks)
+    if isinstance(sampler, HmmSampler):
+        _check_hmm_sampler(sampler, params_path)
     if isinstance(sampler, UniformSampler) and sampler.min_value > sampler.max_value:
         raise ConfigError(
             f"'{params_path}': min_value {sampler.min_value} is greater than max_value {sampler.max_value}."
@@ -137,6 +165,57 @@ def structure_sampler(raw: Any, path: str) -> Sampler:
     if isinstance(sampler, GaussianSampler) and sampler.st_dev < 0:
         raise ConfigError(f"'{params_path}.st_dev' must be >= 0, got {sampler.st_dev}.")
     return sampler
+
+
+def _structure_corpus(raw: Any, path: str) -> tuple[str, ...]:
+    if isinstance(raw, str):
+        raw = raw.splitlines()
+    if not isinstance(raw, list) or not all(isinstance(line, str) for line in raw):
+        raise ConfigError(f"'{path}' must be a list of sequences, each a string of labels separated by "
+                          f"spaces, got {describe_value(raw)}.")
+    return tuple(raw)
+
+
+def _check_hmm_sampler(sampler: HmmSampler, path: str) -> None:
+    """Exactly one of model/corpus, sane sizes, and a model that loads (so a bad one stops the run
+    before anything is launched)."""
+    if bool(sampler.model) == bool(sampler.corpus):
+        raise ConfigError(f"'{path}' needs exactly one of 'model' (a file written by 'unity-stub-env hmm "
+                          "train') or 'corpus' (a list of label sequences).")
+    for key in ("length", "count", "states"):
+        if getattr(sampler, key) < 1:
+            raise ConfigError(f"'{path}.{key}' must be >= 1, got {getattr(sampler, key)}.")
+    if sampler.count * sampler.length > MAX_HMM_VALUES:
+        raise ConfigError(f"'{path}': count * length = {sampler.count * sampler.length} values is more than "
+                          f"{MAX_HMM_VALUES} (each is one side-channel message); send fewer or shorter sequences.")
+    from unity_stub_env import HmmError
+
+    try:
+        hmm_model(sampler)
+    except HmmError as error:
+        raise ConfigError(f"'{path}': {error}") from None
+
+
+def hmm_model(sampler: HmmSampler):
+    """The ``unity_stub_env.hmm.Hmm`` of an hmm sampler (loaded or trained; HmmError if it cannot be)."""
+    return _hmm_model(sampler.model, sampler.corpus, sampler.states)
+
+
+@functools.lru_cache(maxsize=16)
+def _hmm_model(model: str, corpus: tuple[str, ...], states: int):
+    from unity_stub_env import Hmm, parse_corpus, train_hmm
+
+    if model:
+        return Hmm.load(model)
+    return train_hmm(parse_corpus("\n".join(corpus), "the sampler's corpus"), num_states=states, restarts=5, seed=0)
+
+
+@functools.lru_cache(maxsize=16)
+def hmm_sequences(sampler: HmmSampler):
+    """int64 [count, length]: the label codes the sampler sends (the same for the same seed)."""
+    import numpy as np
+
+    return hmm_model(sampler).sample_codes(sampler.count, sampler.length, np.random.default_rng(sampler.seed))
 
 
 def _structure_intervals(raw: Any, path: str) -> tuple[tuple[float, float], ...]:
@@ -256,7 +335,8 @@ def sampler_as_dict(sampler: Sampler) -> dict:
     for f in dataclasses.fields(sampler):
         if f.name != "seed":
             value = getattr(sampler, f.name)
-            parameters[f.name] = [list(pair) for pair in value] if f.name == "intervals" else value
+            parameters[f.name] = ([list(pair) for pair in value] if f.name == "intervals"
+                                  else list(value) if f.name == "corpus" else value)
     return {"sampler_type": sampler.sampler_type, "sampler_parameters": parameters}
 
 
@@ -304,6 +384,8 @@ __all__ = [
     "UniformSampler",
     "GaussianSampler",
     "MultiRangeUniformSampler",
+    "HmmSampler",
+    "hmm_sequences",
     "Sampler",
     "CompletionCriteria",
     "Lesson",

@@ -25,6 +25,10 @@ PPO_KEYS = (
     "batch_size", "buffer_size", "learning_rate", "beta", "epsilon", "lambd", "num_epoch",
     "shared_critic", "learning_rate_schedule", "beta_schedule", "epsilon_schedule",
 )
+SAC_KEYS = (
+    "batch_size", "buffer_size", "learning_rate", "learning_rate_schedule", "buffer_init_steps", "tau",
+    "steps_per_update", "save_replay_buffer", "init_entcoef", "reward_signal_steps_per_update",
+)
 NETWORK_KEYS = ("normalize", "hidden_units", "num_layers", "vis_encode_type", "goal_conditioning_type")
 TRAINER_KEYS = (
     "checkpoint_interval", "init_path", "keep_checkpoints", "even_checkpoints", "max_steps",
@@ -32,7 +36,7 @@ TRAINER_KEYS = (
 )
 #: Keys consumed by the conversion itself (not copied as they are).
 CONVERTED_KEYS = ("trainer", "use_recurrent", "sequence_length", "memory_size", "gamma", "reward_signals")
-LEGACY_MARKERS = frozenset(PPO_KEYS + NETWORK_KEYS + CONVERTED_KEYS + ("max_steps", "time_horizon"))
+LEGACY_MARKERS = frozenset(PPO_KEYS + SAC_KEYS + NETWORK_KEYS + CONVERTED_KEYS + ("max_steps", "time_horizon"))
 MODERN_ONLY_KEYS = frozenset(
     ("behaviors", "default_settings", "env_settings", "engine_settings", "checkpoint_settings",
      "torch_settings", "environment_parameters", "debug")
@@ -56,7 +60,8 @@ def convert_legacy_behavior(config: Mapping, name: str) -> tuple[dict, list[str]
             f"Legacy (0.x) config section '{name}' has no 'trainer:' key. Add 'trainer: ppo' to it or to 'default'."
         )
     new: dict[str, Any] = {"trainer_type": config["trainer"]}
-    hyperparameters = {key: config[key] for key in PPO_KEYS if key in config}
+    trainer_keys = SAC_KEYS if config["trainer"] == "sac" else PPO_KEYS  # the trainer's own class
+    hyperparameters = {key: config[key] for key in trainer_keys if key in config}
     if hyperparameters:
         new["hyperparameters"] = hyperparameters
     network = {key: config[key] for key in NETWORK_KEYS if key in config}
@@ -74,7 +79,7 @@ def convert_legacy_behavior(config: Mapping, name: str) -> tuple[dict, list[str]
     for key in TRAINER_KEYS:
         if key in config:
             new[key] = config[key]
-    used = set(PPO_KEYS + NETWORK_KEYS + TRAINER_KEYS + CONVERTED_KEYS)
+    used = set(trainer_keys + NETWORK_KEYS + TRAINER_KEYS + CONVERTED_KEYS)
     dropped = [str(key) for key in config if key not in used]
     return new, dropped
 

@@ -213,6 +213,10 @@ def check_run_options(options: RunOptions) -> None:
     _check(bool(env.bind.strip()), "--bind", "env_settings.bind", "a host address", repr(env.bind))
     if env.env_path is not None and env.env_path.startswith("stub:") and not env.env_path[5:]:
         raise ConfigError("--env stub:TASK needs a task name after 'stub:', e.g. --env stub:basic.")
+    if options.max_steps_override is not None and options.max_steps_override < 1:
+        raise ConfigError(f"--max-steps must be at least 1, got {options.max_steps_override}.")
+    if options.check and options.capture_spec is not None:
+        raise ConfigError("--check and --capture-spec do different things: give one of them.")
     engine = options.engine_settings
     _check(engine.width >= 1, "--width", "engine_settings.width", ">= 1", engine.width)
     _check(engine.height >= 1, "--height", "engine_settings.height", ">= 1", engine.height)

@@ -19,9 +19,11 @@ logger = logging.getLogger("mlagents_like")
 
 SCHEDULES = ("linear", "constant")
 ENCODER_TYPES = ("simple", "nature_cnn", "resnet", "match3", "fully_connected")
+# the smallest camera height and width each vis_encode_type takes (ML-Agents' limits)
+ENCODER_MIN_SIZE = {"simple": 20, "nature_cnn": 36, "resnet": 15, "match3": 5, "fully_connected": 1}
 CONDITIONING_TYPES = ("hyper", "none")
 TRAINER_TYPES = ("ppo", "sac", "poca")
-TRAINABLE_TRAINER_TYPES = ("ppo",)
+TRAINABLE_TRAINER_TYPES = ("ppo", "sac")
 DEFAULT_CHECKPOINT_NAME = "checkpoint.pt"
 
 
@@ -38,6 +40,32 @@ class PPOSettings:
     learning_rate_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
     beta_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
     epsilon_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
+
+
+@dataclass(frozen=True)
+class SACSettings:
+    """``trainer_type: sac`` hyperparameters (docs/configuration.md, "SAC"). ``steps_per_update`` and
+    ``reward_signal_steps_per_update`` are agent steps per gradient step (floats allowed);
+    ``reward_signal_steps_per_update`` None means: the same as ``steps_per_update``."""
+
+    batch_size: int = 128
+    buffer_size: int = 50000
+    learning_rate: float = 3.0e-4
+    learning_rate_schedule: str = field(default="constant", metadata={"choices": SCHEDULES})
+    buffer_init_steps: int = 0
+    tau: float = 0.005
+    steps_per_update: float = 1.0
+    save_replay_buffer: bool = False
+    init_entcoef: float = 1.0
+    reward_signal_steps_per_update: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.reward_signal_steps_per_update is None:
+            object.__setattr__(self, "reward_signal_steps_per_update", float(self.steps_per_update))
+
+
+#: trainer_type -> its hyperparameters class (poca is refused before its block is read)
+HYPERPARAMETER_CLASSES: dict[str, type] = {"ppo": PPOSettings, "sac": SACSettings}
 
 
 @dataclass(frozen=True)
@@ -130,7 +158,7 @@ def _default_reward_signals() -> dict[str, RewardSignalSettings]:
 @dataclass(frozen=True)
 class TrainerSettings:
     trainer_type: str = "ppo"
-    hyperparameters: PPOSettings = field(default_factory=PPOSettings)
+    hyperparameters: PPOSettings | SACSettings = field(default_factory=PPOSettings)
     checkpoint_interval: int = 500000
     network_settings: NetworkSettings = field(default_factory=NetworkSettings)
     reward_signals: dict[str, RewardSignalSettings] = field(default_factory=_default_reward_signals)
@@ -218,6 +246,14 @@ class RunOptions:
     config_path: str | None = None
     #: --deterministic given on the CLI: also applies to behaviors that get plain defaults.
     cli_deterministic: bool = False
+    #: what to do instead of training (command line only, not in configuration.yaml; docs/mirror.md):
+    #: --check the YAML against --spec FILE, or --capture-spec FILE (record the behaviors and exit)
+    check: bool = False
+    spec_path: str | None = None
+    capture_spec: str | None = None
+    #: --max-steps N: every behavior stops at N steps and summarizes at least every N / 10 (a short
+    #: CI run of a project's YAML, docs/mirror.md); configuration.yaml keeps the YAML's values
+    max_steps_override: int | None = None
 
     def behavior_settings(self, brain_name: str) -> TrainerSettings:
         """The settings for ``brain_name`` (no ``?team=``), with init_path resolved for
@@ -239,6 +275,10 @@ class RunOptions:
             if self.cli_deterministic:
                 network = dataclasses.replace(settings.network_settings, deterministic=True)
                 settings = dataclasses.replace(settings, network_settings=network)
+        if self.max_steps_override is not None:
+            settings = dataclasses.replace(settings, max_steps=self.max_steps_override,
+                                           summary_freq=min(settings.summary_freq,
+                                                            max(self.max_steps_override // 10, 1)))
         init_dir = self.checkpoint_settings.maybe_init_path
         if init_dir is not None:
             if settings.init_path is None:

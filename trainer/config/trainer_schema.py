@@ -6,12 +6,14 @@ import logging
 from typing import Any, Mapping
 
 from trainer.config.settings import (
+    HYPERPARAMETER_CLASSES,
     REWARD_SIGNAL_CLASSES,
     TRAINABLE_TRAINER_TYPES,
     TRAINER_TYPES,
     BehavioralCloningSettings,
     NetworkSettings,
     PPOSettings,
+    SACSettings,
     SelfPlaySettings,
     TrainerSettings,
 )
@@ -31,14 +33,14 @@ logger = logging.getLogger("mlagents_like")
 
 
 def check_trainer_type(value: Any, path: str) -> str:
-    """Only PPO is trainable; sac/poca are known but refused; anything else is unknown."""
+    """PPO and SAC are trainable; poca is known but refused; anything else is unknown."""
     trainer_type = to_str(value, path)
     if trainer_type in TRAINABLE_TRAINER_TYPES:
         return trainer_type
     if trainer_type in TRAINER_TYPES:
         raise ConfigError(
-            f"'{path}' is '{trainer_type}': mlagents-like trains PPO only for now. "
-            f"Set 'trainer_type: ppo'."
+            f"'{path}' is '{trainer_type}': mlagents-like trains {' and '.join(TRAINABLE_TRAINER_TYPES)} "
+            f"only for now. Set 'trainer_type: ppo' (or sac)."
         )
     raise ConfigError(
         f"'{path}': unknown trainer type '{trainer_type}'.{suggestion(trainer_type, TRAINER_TYPES)} "
@@ -46,10 +48,12 @@ def check_trainer_type(value: Any, path: str) -> str:
     )
 
 
-def structure_hyperparameters(raw: Any, path: str) -> PPOSettings:
-    """PPO hyperparameters with the schedule-copy rule: beta/epsilon schedules follow
-    learning_rate_schedule when only it is given."""
+def structure_hyperparameters(raw: Any, path: str, trainer_type: str = "ppo") -> PPOSettings | SACSettings:
+    """The hyperparameters class of ``trainer_type``; for PPO with the schedule-copy rule:
+    beta/epsilon schedules follow learning_rate_schedule when only it is given."""
     raw = dict(require_mapping(raw, path))
+    if trainer_type != "ppo":
+        return structure(HYPERPARAMETER_CLASSES[trainer_type], raw, path)
     if "learning_rate_schedule" in raw:
         raw.setdefault("beta_schedule", raw["learning_rate_schedule"])
         raw.setdefault("epsilon_schedule", raw["learning_rate_schedule"])
@@ -99,9 +103,11 @@ def structure_trainer_settings(raw: Any, path: str, has_defaults: bool = False) 
         raise ConfigError(
             f"'{path}' gives hyperparameters but no trainer_type. Add 'trainer_type: ppo' to it."
         )
+    trainer_type = check_trainer_type(raw.get("trainer_type", "ppo"), join_path(path, "trainer_type"))
+    raw.setdefault("hyperparameters", {})  # the defaults of the trainer type, not PPO's
     hooks = {
         "trainer_type": check_trainer_type,
-        "hyperparameters": structure_hyperparameters,
+        "hyperparameters": lambda v, p: structure_hyperparameters(v, p, trainer_type),
         "reward_signals": structure_reward_signals,
         "max_steps": _max_steps,
         "self_play": lambda v, p: None if v is None else structure(SelfPlaySettings, v, p),
@@ -127,8 +133,11 @@ def check_network_settings(network: NetworkSettings, path: str) -> None:
         _require(memory.sequence_length >= 1, f"{path}.memory.sequence_length", ">= 1", memory.sequence_length)
 
 
-def check_hyperparameters(hp: PPOSettings, path: str) -> None:
+def check_hyperparameters(hp: PPOSettings | SACSettings, path: str) -> None:
     _require(hp.batch_size >= 1, f"{path}.batch_size", ">= 1", hp.batch_size)
+    if isinstance(hp, SACSettings):
+        check_sac_hyperparameters(hp, path)
+        return
     if hp.batch_size > hp.buffer_size:
         raise ConfigError(
             f"'{path}.batch_size' ({hp.batch_size}) must not exceed '{path}.buffer_size' ({hp.buffer_size})."
@@ -138,6 +147,20 @@ def check_hyperparameters(hp: PPOSettings, path: str) -> None:
     _require(hp.epsilon > 0, f"{path}.epsilon", "> 0", hp.epsilon)
     _require(0.0 <= hp.lambd <= 1.0, f"{path}.lambd", "in [0, 1]", hp.lambd)
     _require(hp.num_epoch >= 1, f"{path}.num_epoch", ">= 1", hp.num_epoch)
+
+
+def check_sac_hyperparameters(hp: SACSettings, path: str) -> None:
+    if hp.batch_size > hp.buffer_size:
+        raise ConfigError(
+            f"'{path}.batch_size' ({hp.batch_size}) must not exceed '{path}.buffer_size' ({hp.buffer_size})."
+        )
+    _require(hp.learning_rate > 0, f"{path}.learning_rate", "> 0", hp.learning_rate)
+    _require(hp.buffer_init_steps >= 0, f"{path}.buffer_init_steps", ">= 0", hp.buffer_init_steps)
+    _require(0.0 < hp.tau <= 1.0, f"{path}.tau", "in (0, 1]", hp.tau)
+    _require(hp.steps_per_update > 0, f"{path}.steps_per_update", "> 0", hp.steps_per_update)
+    _require(hp.reward_signal_steps_per_update > 0, f"{path}.reward_signal_steps_per_update", "> 0",
+             hp.reward_signal_steps_per_update)
+    _require(hp.init_entcoef > 0, f"{path}.init_entcoef", "> 0", hp.init_entcoef)
 
 
 def check_trainer_settings(ts: TrainerSettings, path: str) -> None:

@@ -68,23 +68,49 @@ def _windows_candidates(base: str) -> list[str]:
     return [base + ".exe"] + (inside or [os.path.join(base, "*.exe")])
 
 
+def mirror_spec_path(env_path: str | None) -> str | None:
+    """The FILE of ``--env stub:mirror=FILE`` (None for any other --env)."""
+    from unity_stub_env import MIRROR_TASK
+
+    if env_path is None or not is_stub_env(env_path):
+        return None
+    prefix = MIRROR_TASK + "="
+    return next((name[len(prefix):] for name in env_path[len(STUB_PREFIX):].split(",")
+                 if name.startswith(prefix)), None)
+
+
+def _absolute_spec(name: str, mirror: str) -> str:
+    """``mirror=FILE`` with FILE made absolute and checked to exist; other task names unchanged."""
+    if not name.startswith(mirror + "="):
+        return name
+    path = os.path.abspath(os.path.expanduser(name[len(mirror) + 1:]))
+    if not os.path.isfile(path):
+        raise EnvironmentNotFoundError(
+            f"--env stub:{mirror}=FILE: the behavior spec file {path!r} does not exist. Capture one with "
+            "mlagents-like-learn --capture-spec FILE --env BUILD, or take run_logs/behaviors.json of a run."
+        )
+    return f"{mirror}={path}"
+
+
 def resolve_env_path(env_path: str, platform: str | None = None) -> str:
     """The absolute path of the simulator to run for ``--env env_path`` (``stub:TASK`` unchanged).
 
     Raises EnvironmentNotFoundError naming every candidate tried.
     """
     if is_stub_env(env_path):
-        from unity_stub_env import TASK_NAMES
+        from unity_stub_env import MIRROR_TASK, TASK_NAMES
 
         given = env_path[len(STUB_PREFIX):].strip()
-        unknown = [name for name in given.split(",") if name not in TASK_NAMES]  # TASK[,TASK...]
+        names = given.split(",")  # TASK[,TASK...]; mirror=FILE replays a behaviors.json
+        unknown = [name for name in names if name not in TASK_NAMES and not name.startswith(MIRROR_TASK + "=")]
         if not given or unknown:
             what = f"names the unknown stub task {', '.join(map(repr, unknown))}" if given else "names no stub task"
             raise EnvironmentNotFoundError(
                 f"--env {env_path!r} {what}; use --env stub:TASK with one of: {', '.join(TASK_NAMES)} "
-                "(unity-stub-env --list describes them)."
+                f"(unity-stub-env --list describes them), or --env stub:{MIRROR_TASK}=FILE to replay a "
+                "behaviors.json (docs/mirror.md)."
             )
-        return env_path
+        return STUB_PREFIX + ",".join(_absolute_spec(name, MIRROR_TASK) for name in names)
     platform = platform or sys.platform
     base = os.path.abspath(os.path.expanduser(_strip_executable_suffix(env_path.strip())))
     if platform.startswith("darwin"):

@@ -8,6 +8,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from trainer.config.settings import ENCODER_MIN_SIZE
 from trainer.errors import ConfigError
 from trainer.ppo.layers import KAIMING_NORMAL, Swish, linear_layer
 from trainer.ppo.normalizer import Normalizer
@@ -110,13 +111,11 @@ class ResNetVisualEncoder(nn.Module):
         return torch.relu(self.dense(hidden))
 
 
-# vis_encode_type -> (encoder class, minimum height/width)
+# vis_encode_type -> (encoder class, minimum height/width: trainer.config.settings.ENCODER_MIN_SIZE)
 VISUAL_ENCODERS: dict[str, tuple[type[nn.Module], int]] = {
-    "simple": (SimpleVisualEncoder, 20),
-    "nature_cnn": (NatureVisualEncoder, 36),
-    "resnet": (ResNetVisualEncoder, 15),
-    "match3": (SmallVisualEncoder, 5),
-    "fully_connected": (FullyConnectedVisualEncoder, 1),
+    name: (encoder, ENCODER_MIN_SIZE[name]) for name, encoder in (
+        ("simple", SimpleVisualEncoder), ("nature_cnn", NatureVisualEncoder), ("resnet", ResNetVisualEncoder),
+        ("match3", SmallVisualEncoder), ("fully_connected", FullyConnectedVisualEncoder))
 }
 
 

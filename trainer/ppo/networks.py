@@ -5,6 +5,10 @@ network_settings.memory, an LSTM of hidden size memory_size / 2 (Xavier-uniform 
 biases, forget-gate bias 1). A memory [.., memory_size] is the hidden state h then the cell c.
 Actor heads: Gaussian mu (Kaiming normal, gain 0.2) with a state-independent log_sigma (init 0);
 one Linear per discrete branch (Kaiming normal, gain 0.1). Critic: one Linear(h, 1) per reward signal.
+SAC (``squashed`` actor): log_sigma is a second Linear head (Kaiming normal, gain 0.2) clamped to
+[-20, 2], and samples pass through tanh; its Q networks are Critics whose body also takes the
+continuous actions (concatenated after the observation encodings) and whose heads give one value
+per discrete option (docs/sac.md).
 """
 from __future__ import annotations
 
@@ -21,6 +25,7 @@ from trainer.ppo.layers import KAIMING_NORMAL, XAVIER_UNIFORM, hidden_layers, li
 from protos.types import ActionSpec, ObservationSpec
 
 MODEL_EXPORT_VERSION = 3
+LOG_SIGMA_MIN, LOG_SIGMA_MAX = -20.0, 2.0  # the clamp of a squashed (SAC) actor's log sigma
 
 
 def check_network_settings(hyperparams: PPOHyperparams) -> None:
@@ -93,14 +98,16 @@ class ObservationEncoder(nn.Module):
 class NetworkBody(nn.Module):
     """Observation encoders -> hidden layers. [n, *shape_i] ... -> [n, hidden_units]."""
 
-    def __init__(self, observation_specs: Sequence[ObservationSpec], hyperparams: PPOHyperparams):
+    def __init__(self, observation_specs: Sequence[ObservationSpec], hyperparams: PPOHyperparams,
+                 action_size: int = 0):
         super().__init__()
         check_network_settings(hyperparams)
         self.observation_encoder = ObservationEncoder(
             observation_specs, hyperparams.hidden_units, hyperparams.vis_encode_type, hyperparams.normalize
         )
+        self.action_size = action_size  # > 0: continuous actions join the encodings (SAC's Q networks)
         self.hidden = hidden_layers(
-            self.observation_encoder.output_size, hyperparams.hidden_units, hyperparams.num_layers
+            self.observation_encoder.output_size + action_size, hyperparams.hidden_units, hyperparams.num_layers
         )
         self.output_size = hyperparams.hidden_units if hyperparams.num_layers > 0 else (
             self.observation_encoder.output_size
@@ -110,9 +117,12 @@ class NetworkBody(nn.Module):
         if self.lstm is not None:
             self.output_size = self.memory_size // 2
 
-    def forward(self, observations: Sequence[torch.Tensor]) -> torch.Tensor:
-        """[n, *shape_i] ... -> [n, output_size] (networks without memory)."""
-        return self.hidden(self.observation_encoder(observations))
+    def forward(self, observations: Sequence[torch.Tensor], actions: torch.Tensor | None = None) -> torch.Tensor:
+        """[n, *shape_i] ... (and actions [n, action_size]) -> [n, output_size] (networks without memory)."""
+        encoded = self.observation_encoder(observations)
+        if actions is not None:
+            encoded = torch.cat([encoded, actions], dim=1)
+        return self.hidden(encoded)
 
     def forward_memory(self, observations: Sequence[torch.Tensor], memories: torch.Tensor,
                        sequence_length: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
@@ -139,9 +149,10 @@ class Actor(nn.Module):
     """
 
     def __init__(self, observation_specs: Sequence[ObservationSpec], action_spec: ActionSpec,
-                 hyperparams: PPOHyperparams):
+                 hyperparams: PPOHyperparams, squashed: bool = False):
         super().__init__()
         self.action_spec = action_spec
+        self.squashed = squashed  # SAC: state-dependent sigma, tanh-squashed samples
         self.version_number = _constant([float(MODEL_EXPORT_VERSION)])
         self.memory_size_vector = _constant([float(hyperparams.memory_size)])
         self.continuous_act_size_vector = _constant([float(action_spec.continuous_size)])
@@ -151,7 +162,10 @@ class Actor(nn.Module):
         self.mu: nn.Linear | None = None
         if action_spec.continuous_size > 0:
             self.mu = linear_layer(hidden, action_spec.continuous_size, KAIMING_NORMAL, 0.2)
-            self.log_sigma = nn.Parameter(torch.zeros(1, action_spec.continuous_size))
+            if squashed:
+                self.log_sigma_head = linear_layer(hidden, action_spec.continuous_size, KAIMING_NORMAL, 0.2)
+            else:
+                self.log_sigma = nn.Parameter(torch.zeros(1, action_spec.continuous_size))
         self.discrete_branches = nn.ModuleList(
             linear_layer(hidden, size, KAIMING_NORMAL, 0.1) for size in action_spec.discrete_branches
         )
@@ -188,6 +202,14 @@ class Actor(nn.Module):
             logits.append(branch_logits)
         return mu, logits
 
+    def log_sigma_of(self, encoding: torch.Tensor, mu: torch.Tensor) -> torch.Tensor:
+        """log sigma [n, c]: clamp(Linear(encoding), -20, 2) for a squashed actor, else the
+        state-independent parameter broadcast over the batch (``mu * 0 +``, as in the reference's
+        export, which has no Expand)."""
+        if self.squashed:
+            return torch.clamp(self.log_sigma_head(encoding), LOG_SIGMA_MIN, LOG_SIGMA_MAX)
+        return mu * 0 + self.log_sigma
+
     def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:
         self.network_body.update_normalization(observations)
 
@@ -203,21 +225,24 @@ class Critic(nn.Module):
     """
 
     def __init__(self, observation_specs: Sequence[ObservationSpec], reward_signal_names: Sequence[str],
-                 hyperparams: PPOHyperparams, shared_body: NetworkBody | None = None):
+                 hyperparams: PPOHyperparams, shared_body: NetworkBody | None = None,
+                 action_size: int = 0, outputs_per_signal: int = 1):
         super().__init__()
         self.shared = shared_body is not None
         if self.shared:
             object.__setattr__(self, "network_body", shared_body)  # bypasses submodule registration
         else:
-            self.network_body = NetworkBody(observation_specs, hyperparams)
+            self.network_body = NetworkBody(observation_specs, hyperparams, action_size)
         hidden = self.network_body.output_size
+        self.outputs_per_signal = outputs_per_signal  # > 1: SAC's Q of every discrete option
         self.value_heads = nn.ModuleDict(
-            {name: linear_layer(hidden, 1, XAVIER_UNIFORM, 1.0) for name in reward_signal_names}
+            {name: linear_layer(hidden, outputs_per_signal, XAVIER_UNIFORM, 1.0) for name in reward_signal_names}
         )
 
-    def forward(self, observations: Sequence[torch.Tensor]) -> dict[str, torch.Tensor]:
-        """Value estimates per reward signal, each [n]."""
-        return self._values(self.network_body(observations))
+    def forward(self, observations: Sequence[torch.Tensor], actions: torch.Tensor | None = None
+                ) -> dict[str, torch.Tensor]:
+        """Value estimates per reward signal, each [n] (or [n, outputs_per_signal] when > 1)."""
+        return self._values(self.network_body(observations, actions))
 
     def forward_memory(self, observations: Sequence[torch.Tensor], memories: torch.Tensor,
                        sequence_length: int = 1) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
@@ -226,6 +251,8 @@ class Critic(nn.Module):
         return self._values(encoding), memories
 
     def _values(self, encoding: torch.Tensor) -> dict[str, torch.Tensor]:
+        if self.outputs_per_signal > 1:
+            return {name: head(encoding) for name, head in self.value_heads.items()}
         return {name: head(encoding).squeeze(1) for name, head in self.value_heads.items()}
 
     def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:

@@ -33,7 +33,7 @@ from torch import nn
 
 from trainer.ppo.distributions import EPSILON
 from trainer.ppo.encoders import VectorInput
-from trainer.ppo.networks import Actor, Critic, NetworkBody
+from trainer.ppo.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN, Actor, Critic, NetworkBody
 
 
 def supports(module: Actor | Critic, recurrent: bool = False) -> bool:
@@ -221,8 +221,11 @@ class NumpyActor(_NumpyModule):
     def __init__(self, actor: Actor) -> None:
         super().__init__(actor)
         self.mu = _linear(actor.mu) if actor.mu is not None else None  # (W^T, b)
-        self.log_sigma = view(actor.log_sigma) if actor.mu is not None else None  # [1, c]
-        self.gaussian = _Derived(_gaussian_terms, self.log_sigma) if actor.mu is not None else None
+        fixed_sigma = actor.mu is not None and not actor.squashed
+        self.log_sigma = view(actor.log_sigma) if fixed_sigma else None  # [1, c]
+        self.gaussian = _Derived(_gaussian_terms, self.log_sigma) if fixed_sigma else None
+        # a squashed (SAC) actor's log sigma is a head of its own: (W^T, b)
+        self.log_sigma_head = _linear(actor.log_sigma_head) if actor.mu is not None and actor.squashed else None
         self.branches = [_linear(b) for b in actor.discrete_branches]  # (W^T, b) per branch
         self.offsets = actor.mask_offsets
 
@@ -231,13 +234,27 @@ class NumpyActor(_NumpyModule):
         """mu [n, c] or None, masked logits [n, k_b] per branch (action_mask: bool [n, sum],
         True = masked, or None), and for a recurrent actor the next memories [n, m] (from
         ``memories``, zero if None)."""
-        memories_out = None
-        if self.recurrent:
-            if memories is None:
-                memories = np.zeros((len(obs[0]), self.body.memory_size), dtype=np.float32)
-            h, memories_out = self.body.hidden_memory(obs, memories, 1)
-        else:
-            h = self.body.hidden(obs)
+        h, memories_out = self.hidden(obs, memories)
+        mu, logits = self.heads_of(h, action_mask)
+        return mu, logits, memories_out
+
+    def hidden(self, obs: list[np.ndarray], memories: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray | None]:
+        """The body's output [n, h] and, for a recurrent actor, the next memories [n, m]."""
+        if not self.recurrent:
+            return self.body.hidden(obs), None
+        if memories is None:
+            memories = np.zeros((len(obs[0]), self.body.memory_size), dtype=np.float32)
+        return self.body.hidden_memory(obs, memories, 1)
+
+    def log_sigma_of(self, h: np.ndarray) -> np.ndarray:
+        """A squashed actor's log sigma [n, c]: clip(h W^T + b, -20, 2) (networks.Actor.log_sigma_of)."""
+        log_sigma = h @ self.log_sigma_head[0] + self.log_sigma_head[1]
+        return np.minimum(np.maximum(log_sigma, LOG_SIGMA_MIN), LOG_SIGMA_MAX)
+
+    def heads_of(self, h: np.ndarray, action_mask: np.ndarray | None
+                 ) -> tuple[np.ndarray | None, list[np.ndarray]]:
+        """mu [n, c] or None and the masked logits per branch, from the body's output h."""
         mu = h @ self.mu[0] + self.mu[1] if self.mu is not None else None
         logits = []
         for index, (weight, bias) in enumerate(self.branches):
@@ -245,4 +262,4 @@ class NumpyActor(_NumpyModule):
             if action_mask is not None:  # logit * 1 - 0 where allowed, logit * 0 - 1e8 where masked
                 branch = np.where(action_mask[:, self.offsets[index]:self.offsets[index + 1]], -1e8, branch)
             logits.append(branch)
-        return mu, logits, memories_out
+        return mu, logits

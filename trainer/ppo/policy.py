@@ -67,7 +67,11 @@ def allowed_from_mask(action_mask: np.ndarray | None) -> torch.Tensor | None:
 
 
 class Policy:
-    """Actor network plus sampling. ``act`` is the hot path used by the rollout for every decision."""
+    """Actor network plus sampling. ``act`` is the hot path used by the rollout for every decision.
+
+    ``SQUASHED``: the actor kind (networks.Actor); SAC's policy (trainer/sac/policy.py) sets it."""
+
+    SQUASHED = False
 
     def __init__(self, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int,
                  device: str = "cpu"):
@@ -77,7 +81,8 @@ class Policy:
         self.device = torch.device(device)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
-            self.actor = Actor(behavior_spec.observation_specs, self.action_spec, hyperparams).to(self.device)
+            self.actor = Actor(behavior_spec.observation_specs, self.action_spec, hyperparams,
+                               squashed=self.SQUASHED).to(self.device)
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(seed + 1)
         # vector-only actors on the CPU decide in numpy (see numpy_net for why)
@@ -177,7 +182,24 @@ class Policy:
             env_continuous = np.minimum(np.maximum(raw, -CONTINUOUS_CLIP), CONTINUOUS_CLIP) / CONTINUOUS_CLIP
         else:
             raw = env_continuous = np.zeros((n, 0), dtype=np.float32)
+        discrete, branch_probs = self._sample_discrete_numpy(logits, n, deterministic, log_parts)
+        log_probs = log_parts[0] if len(log_parts) == 1 else np.concatenate(log_parts, axis=1)
+        return PolicyOutput(
+            env_actions=ActionTuple(env_continuous, discrete),
+            continuous_raw=raw,
+            discrete=discrete,
+            log_probs=log_probs.astype(np.float32, copy=False),
+            entropy_of=functools.partial(_numpy_entropy, n, gaussian_entropy, branch_probs),
+            memories=memories_out,
+        )
+
+    def _sample_discrete_numpy(self, logits: list[np.ndarray], n: int, deterministic: bool,
+                               log_parts: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
+        """One option per branch from masked logits [n, k_b] (argmax if ``deterministic``, else
+        the policy's torch generator): (discrete int32 [n, b], probabilities per branch); each
+        branch's log-prob [n, 1] is appended to ``log_parts``."""
         discrete = np.empty((n, len(logits)), dtype=np.int32)
+        branch_probs = []
         rows = np.arange(n) if logits else None
         for index, branch_logits in enumerate(logits):
             z = np.exp(branch_logits - _MAX(branch_logits, axis=1, keepdims=True))
@@ -194,15 +216,7 @@ class Policy:
             discrete[:, index] = action
             log_parts.append(np.log(probs[rows, action] + EPSILON)[:, None])
             branch_probs.append(probs)
-        log_probs = log_parts[0] if len(log_parts) == 1 else np.concatenate(log_parts, axis=1)
-        return PolicyOutput(
-            env_actions=ActionTuple(env_continuous, discrete),
-            continuous_raw=raw,
-            discrete=discrete,
-            log_probs=log_probs.astype(np.float32, copy=False),
-            entropy_of=functools.partial(_numpy_entropy, n, gaussian_entropy, branch_probs),
-            memories=memories_out,
-        )
+        return discrete, branch_probs
 
     def evaluate(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None,
                  continuous_actions: torch.Tensor, discrete_actions: torch.Tensor,

@@ -434,6 +434,10 @@ class PPOTrainer:
             self.policy.generator.set_state(rng["policy_sampling"])
             self.shuffle_generator.set_state(rng["minibatch_shuffle"])
 
+    def restart_counters(self) -> None:
+        """--initialize-from: the weights stay, the step count starts over."""
+        self.step = 0
+
     def export_onnx(self, path: str) -> None:
         from trainer.artifacts.onnx_export import export_policy
 

@@ -239,6 +239,7 @@ class UnityEndpoint:
         self._transport = None
         self._pending = None  # the simulator call we owe an answer
         self._deciding: dict[str, int] = {}  # agents per behavior that wait for an action
+        self._dropped: dict = {}  # {behavior: codec.Dropped}: deciding agents left out for NaN/Inf
         self._messages_received = 0
         self._closed = False
 
@@ -366,6 +367,15 @@ class UnityEndpoint:
                 raise ValueError(
                     f"{name}: {rows.pop()} action rows for {self._deciding.get(name, 0)} deciding agents"
                 )
+        for name, dropped in self._dropped.items():
+            # the simulator matches actions to its agents by position: the agents left out for
+            # NaN/Inf get zero actions in their places (docs/protocol.md §3.1)
+            owed = self.behavior_specs[name].action_spec.empty_action(dropped.deciding)
+            if len(dropped.kept):
+                continuous, discrete = codec.as_action_matrices(full_actions[name])
+                owed.continuous[dropped.kept] = continuous
+                owed.discrete[dropped.kept] = discrete
+            full_actions[name] = owed
         self._answer_bytes(codec.encode_answer(full_actions, side_channel))
 
     def receive(self) -> StepResult:
@@ -373,6 +383,7 @@ class UnityEndpoint:
         result = self._wait_for_call().result
         self.behavior_specs.update(result.specs)
         self._deciding = {name: len(steps[0]) for name, steps in result.steps.items()}
+        self._dropped = {name: d for name, d in result.dropped.items() if d.deciding}
         return result
 
     def reset(self, side_channel: bytes = b"") -> StepResult:

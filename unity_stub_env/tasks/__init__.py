@@ -11,14 +11,18 @@ from __future__ import annotations
 from unity_stub_env.tasks.ball3d import Ball3DTask
 from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
 from unity_stub_env.tasks.basic import BasicTask
+from unity_stub_env.tasks.creature import CreatureTask
 from unity_stub_env.tasks.dodge import DodgeTask
 from unity_stub_env.tasks.mimic import MimicTask
+from unity_stub_env.tasks.runner import RunnerTask
 
 TASKS: dict[str, type[Task]] = {
     BasicTask.name: BasicTask,
     Ball3DTask.name: Ball3DTask,
     DodgeTask.name: DodgeTask,
+    CreatureTask.name: CreatureTask,
     MimicTask.name: MimicTask,
+    RunnerTask.name: RunnerTask,
 }
 
 
@@ -30,4 +34,5 @@ def make_task(name: str, num_areas: int = 1, seed: int = 0,
     return TASKS[name](num_areas=num_areas, seed=seed, env_params=env_params)
 
 
-__all__ = ["TASKS", "make_task", "Task", "TaskStep", "EnvironmentParameters", "BasicTask", "Ball3DTask", "DodgeTask", "MimicTask"]
+__all__ = ["TASKS", "make_task", "Task", "TaskStep", "EnvironmentParameters", "BasicTask", "Ball3DTask", "DodgeTask", "CreatureTask",
+           "MimicTask", "RunnerTask"]

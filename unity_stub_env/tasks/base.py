@@ -68,7 +68,10 @@ class Task:
 
     name: str = ""
     behavior_name: str = ""
+    team_id: int = 0  # the behavior is sent as behavior_name?team=team_id
     observation_specs: tuple[ObservationSpec, ...] = ()
+    # per observation "none" or "png" (a camera sent PNG-compressed); None: all uncompressed
+    observation_compressions: tuple[str, ...] | None = None
     action_spec: ActionSpec = ActionSpec(0, ())
     agents_per_area: int = 1
     max_step: int = 0
@@ -97,6 +100,9 @@ class Task:
         raise NotImplementedError
 
     def action_mask(self) -> np.ndarray | None:
+        return None
+
+    def group_ids(self) -> np.ndarray | None:
         return None
 
     # Helpers -------------------------------------------------------------------------------

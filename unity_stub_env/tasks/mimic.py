@@ -40,7 +40,8 @@ forearms, thighs, shanks, feet: ``OBSERVED``; the hands are welded, so their sta
 pelvis' is its world orientation), the linear velocity and the angular velocity, and the position
 relative to the pelvis (for the pelvis: 0, 0, its height above the floor), all three vectors in the
 pelvis frame; then the phase of the reference in [0, 1) (frame / frames; 0 for ``stand``). The
-reference pose itself is not observed.
+reference pose itself is not observed. Observations and rewards read MuJoCo's kinematics after the
+decision's last ``mj_step``, i.e. of the state one 0.004 s step earlier (what ``mj_step`` leaves).
 
 Reference motions (``mimic_motions``: stand, arms, squat, walk, CSV files at 50 Hz made by
 ``python -m unity_stub_env.tasks.mimic_motions``), chosen per episode by the environment parameter
@@ -122,10 +123,24 @@ def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+    """Hamilton product of quaternions (w, x, y, z) [..., 4]."""
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = aw * bw - ax * bx - ay * by - az * bz
+    out[..., 1] = aw * bx + ax * bw + ay * bz - az * by
+    out[..., 2] = aw * by - ax * bz + ay * bw + az * bx
+    out[..., 3] = aw * bz + ax * by - ay * bx + az * bw
+    return out
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b for [..., 3] arrays (np.cross's axis handling costs more than the product here)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def quat_conj(q: np.ndarray) -> np.ndarray:
@@ -163,8 +178,8 @@ class Reference:
         for name in MOTIONS:
             q = load_motion(name).qpos
             count = len(q)
-            step = (q[-1, 1] - q[-2, 1]) if name == "walk" else 0.0
-            stride.append(q[-1, 1] + step if name == "walk" else 0.0)
+            # the walk advances by one stride per loop: its last advance plus one more frame's
+            stride.append(2 * q[-1, 1] - q[-2, 1] if name == "walk" else 0.0)
             after = q[np.arange(1, count + 1) % count].copy()
             before = q[np.arange(-1, count - 1) % count].copy()
             after[-1, 1] += stride[-1]
@@ -252,7 +267,6 @@ class MimicTask(Task):
         # per-agent episode state
         self.motion = np.zeros(n, dtype=np.int64)
         self.frame = np.zeros(n, dtype=np.int64)  # index within the motion's clip
-        self.cycles = np.zeros(n, dtype=np.int64)  # walk: completed loops (stride offsets)
         self.episode_step = np.zeros(n, dtype=np.int64)
         self.weights = np.zeros((n, 5))
         self.scales = np.tile(SCALES, (n, 1))
@@ -294,7 +308,6 @@ class MimicTask(Task):
         frames = self.ref.frames[motion]
         rsi = get("rsi", 1, count) > 0.5
         self.frame[agents] = np.where(rsi, (self.rng.random(count) * frames).astype(np.int64), 0)
-        self.cycles[agents] = 0
         self.episode_step[agents] = 0
         self.term_sum[agents] = 0.0
         preset = np.rint(get("reward_weights", 0, count))
@@ -341,7 +354,7 @@ class MimicTask(Task):
         pelvis_pos = data.xpos[self.pelvis]
         angular = data.cvel[self.parts, :3]
         offset = data.xpos[self.parts] - data.subtree_com[self.pelvis][:, None, :]
-        linear = data.cvel[self.parts, 3:] + np.cross(angular, offset)  # cvel is about the root subtree CoM
+        linear = data.cvel[self.parts, 3:] + cross(angular, offset)  # cvel is about the root subtree CoM
         relative = data.xpos[self.parts] - pelvis_pos[:, None, :]
         to_local = lambda v: np.einsum("nji,nkj->nki", rot, v)  # noqa: E731  R^T v for every part
         position = to_local(relative)
@@ -374,9 +387,7 @@ class MimicTask(Task):
         # advance the reference
         frames = self.ref.frames[self.motion]
         self.frame += 1
-        wrapped = self.frame >= frames
-        self.cycles += wrapped
-        self.frame[wrapped] = 0
+        self.frame[self.frame >= frames] = 0
         rows = self.ref_rows()
         terms, drift = self.compare(rows)
         rewards = (self.weights * terms).sum(axis=1)
@@ -406,7 +417,7 @@ class MimicTask(Task):
         com_error = data.subtree_com[self.pelvis] - (anchor + ref.com[rows])
         com_sq = (com_error**2).sum(axis=1)
         end_sq = ((data.geom_xpos[self.ends] - (anchor[:, None, :] + ref.end[rows])) ** 2).sum(axis=(1, 2))
-        pelvis_speed = data.cvel[self.pelvis, 4] + np.cross(data.cvel[self.pelvis, :3], data.xpos[self.pelvis]
+        pelvis_speed = data.cvel[self.pelvis, 4] + cross(data.cvel[self.pelvis, :3], data.xpos[self.pelvis]
                                                             - data.subtree_com[self.pelvis])[:, 1]
         speed_sq = (pelvis_speed - ref.speed[self.motion]) ** 2
         return reward_terms(rot_sq, vel_sq, com_sq, end_sq, speed_sq, self.scales), np.sqrt(com_sq)
@@ -430,7 +441,7 @@ class MimicTask(Task):
 # with each impulse of PUSH_LADDER (N s; 70 kg: 10 N s changes the whole body's velocity by
 # 0.14 m/s), in a random horizontal direction at the torso.
 EVAL_SECONDS = 10.0
-PUSH_LADDER = (10.0, 20.0, 30.0, 40.0)
+PUSH_LADDER = (10.0, 15.0, 20.0, 30.0)
 PUSH_EVAL_INTERVAL = 2.0
 
 

@@ -1,0 +1,99 @@
+"""SAC's acting policy: a squashed Gaussian (tanh of a sample with a state-dependent sigma) for
+continuous actions and the PPO policy's categorical sampling for discrete branches.
+
+The environment receives tanh(sample) in (-1, 1) (no clipping), and the same squashed action is
+what the replay buffer stores (``continuous_raw``): the Q networks take squashed actions.
+Deterministic acting uses tanh(mu). As for PPO, vector-observation actors on the CPU decide in
+numpy (numpy_net.py says why), drawing noise from the same torch generator.
+"""
+from __future__ import annotations
+
+import functools
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from protos.types import ActionTuple
+from trainer.ppo.distributions import EPSILON
+from trainer.ppo.policy import Policy, PolicyOutput, allowed_from_mask
+from trainer.sac.losses import squashed_log_prob
+
+_HALF_LOG_2PI = 0.5 * np.log(2 * np.pi)
+_LOG_2 = np.log(2.0)
+
+
+def _numpy_squashed_log_prob(raw: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
+    """losses.squashed_log_prob in numpy. [n, c] -> [n, c]."""
+    sigma = np.exp(log_sigma)
+    gaussian = -((raw - mu) ** 2) / (2 * sigma**2 + EPSILON) - np.log(sigma + EPSILON) - _HALF_LOG_2PI
+    return gaussian - 2.0 * (_LOG_2 - raw - np.logaddexp(0.0, -2.0 * raw))
+
+
+def _entropy(n: int, log_sigma: np.ndarray | None, branch_probs: list[np.ndarray]) -> np.ndarray:
+    """float32 [n]: the Gaussian's mean entropy over its dimensions *before* the tanh (the squashed
+    one has no closed form) plus each discrete branch's entropy."""
+    entropy = np.zeros(n, dtype=np.float32)
+    if log_sigma is not None:
+        entropy = entropy + np.mean(0.5 * np.log(2 * np.pi * np.e) + log_sigma, axis=1)
+    for probs in branch_probs:
+        entropy = entropy - (probs * np.log(probs + EPSILON)).sum(axis=1)
+    return entropy.astype(np.float32)
+
+
+class SACPolicy(Policy):
+    SQUASHED = True
+
+    def act(self, obs: Sequence[np.ndarray], action_mask: np.ndarray | None = None,
+            deterministic: bool = False, memories: np.ndarray | None = None) -> PolicyOutput:
+        """Actions for n agents in one forward pass (see Policy.act for the arguments)."""
+        deterministic = deterministic or self.hyperparams.deterministic
+        n = len(obs[0])
+        log_parts: list[np.ndarray] = []
+        if self._numpy_actor is not None:
+            h, _ = self._numpy_actor.hidden(list(obs))
+            mu, logits = self._numpy_actor.heads_of(h, action_mask)
+            log_sigma = self._numpy_actor.log_sigma_of(h) if mu is not None else None
+        else:
+            with torch.inference_mode():
+                encoding = self.actor.network_body(self._to_tensors(obs))
+                allowed = allowed_from_mask(action_mask)
+                mu_t, logits_t = self.actor.heads_of(encoding, None if allowed is None else allowed.to(self.device))
+                log_sigma = None if mu_t is None else self.actor.log_sigma_of(encoding, mu_t).cpu().numpy()
+                mu = None if mu_t is None else mu_t.cpu().numpy()
+                logits = [branch.cpu().numpy() for branch in logits_t]
+        if mu is not None:
+            raw = mu if deterministic else (
+                mu + torch.randn(mu.shape, generator=self.generator).numpy() * np.exp(log_sigma))
+            log_parts.append(_numpy_squashed_log_prob(raw, mu, log_sigma))
+            continuous = np.tanh(raw).astype(np.float32, copy=False)
+        else:
+            continuous = np.zeros((n, 0), dtype=np.float32)
+        discrete, branch_probs = self._sample_discrete_numpy(logits, n, deterministic, log_parts)
+        log_probs = np.concatenate(log_parts, axis=1) if log_parts else np.zeros((n, 0), np.float32)
+        return PolicyOutput(
+            env_actions=ActionTuple(continuous, discrete),
+            continuous_raw=continuous,
+            discrete=discrete,
+            log_probs=log_probs.astype(np.float32, copy=False),
+            entropy_of=functools.partial(_entropy, n, log_sigma, branch_probs),
+        )
+
+    def sample_with_grad(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None, generator: torch.Generator
+                         ) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]:
+        """For the update, with gradients: (squashed actions [n, c] (reparameterised), their
+        log-probs [n, c], the discrete probabilities [n, K] and log(p + eps) [n, K] of every
+        option; None for an absent action kind)."""
+        encoding = self.actor.network_body(obs)
+        mu, logits = self.actor.heads_of(encoding, allowed)
+        actions = log_probs = probs = all_log_probs = None
+        if mu is not None:
+            log_sigma = self.actor.log_sigma_of(encoding, mu)
+            noise = torch.randn(mu.shape, generator=generator, device=mu.device)
+            raw = mu + noise * torch.exp(log_sigma)
+            actions = torch.tanh(raw)
+            log_probs = squashed_log_prob(raw, mu, log_sigma)
+        if logits:
+            probs = torch.cat([torch.softmax(branch, dim=1) for branch in logits], dim=1)
+            all_log_probs = torch.log(probs + EPSILON)
+        return actions, log_probs, probs, all_log_probs

@@ -1,0 +1,325 @@
+"""SACTrainer: trajectories into a replay buffer, then soft actor-critic gradient steps.
+
+One trainer per brain, with the PPOTrainer's interface for the run loop (``process_trajectory``,
+``ready_to_update``, ``update``, ``state_dict``, ``export_onnx``). Networks (docs/sac.md):
+
+* the policy: networks.Actor, squashed (tanh; state-dependent sigma);
+* a value network V(s) and its target copy (soft-updated with ``tau`` after every step);
+* twin Q networks Q1, Q2 (s, continuous actions) -> a value per discrete option (or one);
+* log entropy coefficients: one for the continuous block, one per discrete branch.
+
+Each gradient step samples ``batch_size`` experiences and steps three Adams (adam.py): the policy
+on its loss, V + Q1 + Q2 on theirs, the log alphas on theirs. Gradient steps keep pace with
+experience: after ``buffer_init_steps`` agent steps, one step per ``steps_per_update`` agent steps.
+"""
+from __future__ import annotations
+
+import logging
+from itertools import chain
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from protos.types import BehaviorSpec
+from trainer.config.support import SAC_REWARD_SIGNALS
+from trainer.errors import ConfigError
+from trainer.ppo import numpy_net
+from trainer.ppo.adam import Adam
+from trainer.ppo.buffer import Trajectory
+from trainer.ppo.networks import Critic, NetworkBody
+from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
+from trainer.sac import losses
+from trainer.sac.hyperparams import SACHyperparams
+from trainer.sac.policy import SACPolicy
+from trainer.sac.replay_buffer import ReplayBuffer
+
+logger = logging.getLogger("mlagents_like")
+
+
+class TwinQ(nn.Module):
+    """Q1 and Q2 (checkpoint key ``Optimizer:q_network``, as in the reference)."""
+
+    def __init__(self, q1: Critic, q2: Critic):
+        super().__init__()
+        self.q1_network, self.q2_network = q1, q2
+
+
+class EntropyCoefficients(nn.Module):
+    """log alpha of the continuous block [1] and of every discrete branch [b]."""
+
+    def __init__(self, init_entcoef: float, has_continuous: bool, branches: int):
+        super().__init__()
+        start = float(np.log(init_entcoef))
+        self.continuous = nn.Parameter(torch.full((1,), start)) if has_continuous else None
+        self.discrete = nn.Parameter(torch.full((branches,), start)) if branches else None
+
+
+@torch.no_grad()
+def copy_normalization(source: NetworkBody, target: NetworkBody) -> None:
+    """The target body's observation normalisers take the source's statistics."""
+    for src, dst in zip(source.observation_encoder.encoders, target.observation_encoder.encoders):
+        if getattr(src, "normalizer", None) is not None and getattr(dst, "normalizer", None) is not None:
+            for name, buffer in src.normalizer.named_buffers():
+                getattr(dst.normalizer, name).copy_(buffer)
+
+
+def _obs_key(index: int) -> str:
+    return f"obs_{index}"
+
+
+def _next_obs_key(index: int) -> str:
+    return f"next_obs_{index}"
+
+
+class SACTrainer:
+    def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: SACHyperparams,
+                 seed: int, device: str = "cpu"):
+        for name in hyperparams.reward_signals:
+            if name not in SAC_REWARD_SIGNALS:
+                raise ConfigError(f"reward_signals.{name} is not supported with SAC yet for behavior "
+                                  f"{brain_name!r}; use only {list(SAC_REWARD_SIGNALS)}")
+        if not hyperparams.reward_signals:
+            raise ConfigError(f"behavior {brain_name!r} has no reward_signals; add an extrinsic block")
+        if hyperparams.memory_size:
+            raise ConfigError(f"behavior {brain_name!r}: SAC with network_settings.memory is not implemented yet")
+        self.brain_name = brain_name
+        self.behavior_spec = behavior_spec
+        self.hyperparams = hyperparams
+        self.device = torch.device(device)
+        spec = behavior_spec.action_spec
+        self.branches = list(spec.discrete_branches)
+        self.policy = SACPolicy(behavior_spec, hyperparams, seed, device)
+        names = list(hyperparams.reward_signals)
+        obs_specs = behavior_spec.observation_specs
+        q_outputs = max(sum(self.branches), 1)
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed + 2)
+            self.critic = Critic(obs_specs, names, hyperparams).to(self.device)
+            self.q_network = TwinQ(*(Critic(obs_specs, names, hyperparams, action_size=spec.continuous_size,
+                                            outputs_per_signal=q_outputs) for _ in range(2))).to(self.device)
+            self.target_network = Critic(obs_specs, names, hyperparams).to(self.device)
+        losses.soft_update(self.critic, self.target_network, 1.0)
+        # parameter lists walked every gradient step (nn.Module's own walk costs more than the ops)
+        self._q1_params = list(self.q_network.q1_network.parameters())
+        self._critic_params = list(self.critic.parameters())
+        self._target_params = list(self.target_network.parameters())
+        self.log_ent_coef = EntropyCoefficients(hyperparams.init_entcoef, spec.continuous_size > 0,
+                                                len(self.branches)).to(self.device)
+        self.target_entropy = losses.target_entropies(spec.continuous_size, self.branches)
+        lr = hyperparams.learning_rate
+        self.policy_optimizer = Adam([p for p in self.policy.actor.parameters() if p.requires_grad],
+                                     lr=lr)  # adam.py says why not torch.optim
+        self.value_optimizer = Adam(chain(self.critic.parameters(), self.q_network.parameters()), lr=lr)
+        self.entropy_optimizer = Adam(self.log_ent_coef.parameters(), lr=lr)
+        self.buffer = ReplayBuffer(hyperparams.buffer_size)
+        self.sample_generator = torch.Generator()
+        self.sample_generator.manual_seed(seed + 3)
+        self.noise_generator = torch.Generator(device=self.device)  # the update's policy samples
+        self.noise_generator.manual_seed(seed + 4)
+        self.step = 0
+        self.update_steps = 1  # gradient steps taken + 1 (the reference's counter, kept on resume)
+        self._numpy_critic = numpy_net.NumpyCritic(self.critic) if (
+            numpy_net.supports(self.critic) and self.device.type == "cpu") else None
+
+    # ------------------------------------------------------------------ experience
+    def _tensors(self, arrays) -> list[torch.Tensor]:
+        return [torch.as_tensor(np.asarray(a, dtype=np.float32), device=self.device) for a in arrays]
+
+    def process_trajectory(self, traj: Trajectory) -> dict[str, float]:
+        """Normalise (once per trajectory, as PPO) and store the experiences; report V(s)."""
+        length = len(traj)
+        obs = [np.asarray(o, np.float32) for o in traj.obs]
+        if self.hyperparams.normalize:
+            self.policy.actor.update_normalization(self._tensors(obs))
+        fields: dict[str, np.ndarray] = {}
+        for index, (o, last) in enumerate(zip(obs, traj.next_obs)):
+            fields[_obs_key(index)] = o
+            fields[_next_obs_key(index)] = np.concatenate([o[1:], np.asarray(last, np.float32)[None]], axis=0)
+        fields["continuous_actions"] = np.asarray(traj.continuous_actions, np.float32).reshape(length, -1)
+        fields["discrete_actions"] = np.asarray(traj.discrete_actions, np.int64).reshape(length, -1)
+        mask_width = sum(self.branches)
+        fields["action_masks"] = (np.zeros((length, mask_width), dtype=bool) if traj.action_masks is None
+                                  else np.asarray(traj.action_masks, dtype=bool))
+        fields["rewards"] = np.asarray(traj.rewards, np.float32)
+        done = np.zeros(length, dtype=np.float32)  # an interrupted episode bootstraps from its last obs
+        done[-1] = float(traj.done and not traj.interrupted)
+        fields["done"] = done
+        self.buffer.add(fields)
+        self.step += length
+        copy_normalization(self.policy.actor.network_body, self.critic.network_body)
+        if self._numpy_critic is not None:
+            values = self._numpy_critic(obs)
+        else:
+            with torch.inference_mode():
+                values = {k: v.cpu().numpy() for k, v in self.critic(self._tensors(obs)).items()}
+        return {f"Policy/{name.capitalize()} Value": float(np.mean(v)) for name, v in values.items()}
+
+    def forget_episodes(self) -> None:
+        """Nothing is kept per unfinished episode (the run loop calls this after a reset)."""
+
+    # ------------------------------------------------------------------ update
+    def _updates_due(self) -> bool:
+        h = self.hyperparams
+        return (self.step - h.buffer_init_steps) / self.update_steps > h.steps_per_update
+
+    def ready_to_update(self) -> bool:
+        h = self.hyperparams
+        return len(self.buffer) >= h.batch_size and self.step >= h.buffer_init_steps and self._updates_due()
+
+    def learning_rate(self) -> float:
+        h = self.hyperparams
+        return decay(h.learning_rate_schedule, h.learning_rate, LEARNING_RATE_FLOOR, self.step, h.max_steps)
+
+    def update(self) -> dict[str, float]:
+        """Gradient steps until they caught up with the agent steps (one per steps_per_update)."""
+        learning_rate = self.learning_rate()
+        for optimizer in (self.policy_optimizer, self.value_optimizer, self.entropy_optimizer):
+            optimizer.param_groups[0]["lr"] = learning_rate
+        actor_body = self.policy.actor.network_body
+        for network in (self.critic, self.target_network, self.q_network.q1_network, self.q_network.q2_network):
+            copy_normalization(actor_body, network.network_body)
+        collected: dict[str, list[float]] = {}
+        while self._updates_due():
+            batch = self.buffer.sample(self.hyperparams.batch_size, self.sample_generator)
+            for key, value in self.gradient_step(batch).items():
+                collected.setdefault(key, []).append(value)
+            self.update_steps += 1
+        result = {key: float(np.mean(values)) for key, values in collected.items()}
+        result["Policy/Learning Rate"] = learning_rate
+        return result
+
+    def gradient_step(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
+        """One SAC step on a sampled minibatch (numpy columns of the replay buffer)."""
+        spec = self.behavior_spec.action_spec
+        n_obs = len(self.behavior_spec.observation_specs)
+        t = {key: torch.as_tensor(value, device=self.device) for key, value in batch.items()}
+        obs = [t[_obs_key(i)] for i in range(n_obs)]
+        next_obs = [t[_next_obs_key(i)] for i in range(n_obs)]
+        allowed = (~t["action_masks"]).float() if self.branches else None
+        actions, cont_log_probs, probs, all_log_probs = self.policy.sample_with_grad(obs, allowed, self.noise_generator)
+        stored = t["continuous_actions"] if spec.continuous_size else None
+        q1, q2 = self.q_network.q1_network, self.q_network.q2_network
+        # Q1 of the policy's own actions with Q1's parameters held constant: the policy loss's
+        # gradient reaches the policy only, so one backward pass serves all three losses
+        for p in self._q1_params:
+            p.requires_grad_(False)
+        try:
+            q1_policy = q1(obs, actions)
+        finally:
+            for p in self._q1_params:
+                p.requires_grad_(True)
+        with torch.no_grad():
+            q2_policy = q2(obs, actions)
+            next_values = self.target_network(next_obs)
+        q1_taken, q2_taken = q1(obs, stored), q2(obs, stored)
+        values = self.critic(obs)
+        alpha_c = self.log_ent_coef.continuous.exp().detach() if spec.continuous_size else None
+        alpha_d = self.log_ent_coef.discrete.exp().detach() if self.branches else None
+        names = list(self.hyperparams.reward_signals)
+        q1_losses, q2_losses, value_losses = [], [], []
+        for name in names:
+            gamma, strength = self.hyperparams.reward_signals[name]
+            backup = losses.q_backup(t["rewards"] * strength, t["done"], next_values[name], gamma)
+            taken1, taken2 = q1_taken[name], q2_taken[name]
+            if self.branches:
+                discrete = t["discrete_actions"]
+                taken1 = losses.chosen_q(taken1, discrete, self.branches)
+                taken2 = losses.chosen_q(taken2, discrete, self.branches)
+            q1_losses.append(losses.q_loss(taken1, backup))
+            q2_losses.append(losses.q_loss(taken2, backup))
+            v_target = losses.value_target(q1_policy[name], q2_policy[name], cont_log_probs, alpha_c,
+                                           probs, all_log_probs, alpha_d, self.branches)
+            value_losses.append(0.5 * torch.mean((values[name] - v_target) ** 2))
+        q1_loss, q2_loss = torch.stack(q1_losses).mean(), torch.stack(q2_losses).mean()
+        value_loss = torch.stack(value_losses).mean()
+        mean_q1_policy = torch.stack([q1_policy[name] for name in names]).mean(dim=0)
+        policy_loss = losses.policy_loss(mean_q1_policy, cont_log_probs, alpha_c, probs, all_log_probs,
+                                         alpha_d, self.branches)
+        entropy_loss = losses.entropy_loss(
+            self.log_ent_coef.continuous, None if cont_log_probs is None else cont_log_probs.detach(),
+            self.target_entropy[0], self.log_ent_coef.discrete,
+            None if probs is None else probs.detach(), None if all_log_probs is None else all_log_probs.detach(),
+            self.target_entropy[1], self.branches)
+
+        # each loss reaches only its own parameters (targets and alphas are constants in the
+        # others), so the sum's gradient is each optimiser's own
+        optimizers = (self.policy_optimizer, self.value_optimizer, self.entropy_optimizer)
+        for optimizer in optimizers:
+            optimizer.zero_grad()
+        (policy_loss + q1_loss + q2_loss + value_loss + entropy_loss).backward()
+        for optimizer in optimizers:
+            optimizer.step()
+        losses.soft_update(self._critic_params, self._target_params, self.hyperparams.tau)
+        stats = {
+            "Losses/Policy Loss": policy_loss.item(),
+            "Losses/Value Loss": value_loss.item(),
+            "Losses/Q1 Loss": q1_loss.item(),
+            "Losses/Q2 Loss": q2_loss.item(),
+        }
+        if spec.continuous_size:
+            stats["Policy/Continuous Entropy Coeff"] = float(self.log_ent_coef.continuous.detach().exp().mean())
+        if self.branches:
+            stats["Policy/Discrete Entropy Coeff"] = float(self.log_ent_coef.discrete.detach().exp().mean())
+        return stats
+
+    # ------------------------------------------------------------------ persistence
+    def state_dict(self) -> dict[str, Any]:
+        """checkpoint.pt content: the reference's keys, plus the entropy coefficients (which the
+        reference does not save), the update counter and the generators (``RNG``)."""
+        return {
+            "Policy": self.policy.actor.state_dict(),
+            "global_step": {"step": torch.tensor(self.step, dtype=torch.int64)},
+            "Optimizer:q_network": self.q_network.state_dict(),
+            "Optimizer:value_network": self.critic.state_dict(),
+            "Optimizer:target_network": self.target_network.state_dict(),
+            "Optimizer:policy_optimizer": self.policy_optimizer.state_dict(),
+            "Optimizer:value_optimizer": self.value_optimizer.state_dict(),
+            "Optimizer:entropy_optimizer": self.entropy_optimizer.state_dict(),
+            "Optimizer:entropy_coefficients": self.log_ent_coef.state_dict(),
+            "SAC": {"update_steps": torch.tensor(self.update_steps, dtype=torch.int64)},
+            "RNG": {
+                "policy_sampling": self.policy.generator.get_state(),
+                "replay_sampling": self.sample_generator.get_state(),
+                "update_noise": self.noise_generator.get_state(),
+            },
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if "Optimizer:q_network" not in state:
+            raise KeyError("the checkpoint has no SAC networks (Optimizer:q_network); was it written by PPO?")
+        self.policy.actor.load_state_dict(state["Policy"])
+        self.q_network.load_state_dict(state["Optimizer:q_network"])
+        self.critic.load_state_dict(state["Optimizer:value_network"])
+        self.target_network.load_state_dict(state["Optimizer:target_network"])
+        self.policy_optimizer.load_state_dict(state["Optimizer:policy_optimizer"])
+        self.value_optimizer.load_state_dict(state["Optimizer:value_optimizer"])
+        if "Optimizer:entropy_coefficients" in state:
+            self.log_ent_coef.load_state_dict(state["Optimizer:entropy_coefficients"])
+            self.entropy_optimizer.load_state_dict(state["Optimizer:entropy_optimizer"])
+        self.step = int(state["global_step"]["step"])
+        sac = state.get("SAC")
+        self.update_steps = (int(sac["update_steps"]) if sac is not None
+                             else int(max(1, self.step / self.hyperparams.steps_per_update)))
+        rng = state.get("RNG")
+        if rng is not None:
+            self.policy.generator.set_state(rng["policy_sampling"])
+            self.sample_generator.set_state(rng["replay_sampling"])
+            self.noise_generator.set_state(rng["update_noise"])
+
+    def restart_counters(self) -> None:
+        """--initialize-from: the weights stay, the step and update counters start over."""
+        self.step = 0
+        self.update_steps = 1
+
+    def save_replay_buffer(self, path: str) -> None:
+        self.buffer.save(path)
+
+    def load_replay_buffer(self, path: str) -> None:
+        self.buffer.load(path)
+
+    def export_onnx(self, path: str) -> None:
+        from trainer.artifacts.onnx_export import export_policy
+
+        export_policy(self.policy, path)
