@@ -1,5 +1,5 @@
 """A misbehaving simulator for tests/integration/test_hostile_simulators.py, launched by the
-trainer as its --env player (a tiny shell script runs ``python -m tests.integration.hostile_sim``).
+trainer as its --env player (a tiny shell script runs ``python tests/integration/hostile_sim.py``).
 
 It speaks the real protocol over the stub's own HTTP/2 client (M1, M2, then steps of one
 behavior ``H?team=0`` with one vector observation of 2 floats and 2 continuous actions) and

@@ -15,6 +15,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -43,10 +44,14 @@ def _limit_memory() -> None:
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
 
 
+HOSTILE_SIM = Path(__file__).with_name("hostile_sim.py")
+
+
 def run_trainer(tmp_path, env_no_proxy, case: str, after: int = 0, max_steps: int = 100000,
                 timeout_wait: int = 20, extra: tuple = ()) -> subprocess.CompletedProcess:
     game = tmp_path / "Hostile.x86_64"
-    game.write_text(f"#!/bin/sh\nexec {sys.executable} -m tests.integration.hostile_sim \"$@\"\n")
+    # by path, not ``-m tests...``: a fresh clone's venv has the project packages but not ``tests``
+    game.write_text(f"#!/bin/sh\nexec {sys.executable} {HOSTILE_SIM} \"$@\"\n")
     game.chmod(0o755)
     config = tmp_path / "h.yaml"
     config.write_text(textwrap.dedent(CONFIG % max_steps))
