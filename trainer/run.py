@@ -487,6 +487,12 @@ def pool_settings_of(options, env_vars: EnvVars) -> PoolSettings:
     if world > 1 and not env.env_path:
         raise UserError(f"{world} data-parallel ranks need --env: each rank launches its own simulators "
                         "(the Unity Editor is one environment).")
+    configured = [options.default_settings, *options.behaviors.values()]
+    not_ppo = sorted({s.trainer_type for s in configured if s is not None and s.trainer_type != "ppo"})
+    if world > 1 and not_ppo:
+        raise UserError(f"{world} data-parallel ranks average PPO gradients only; this config uses "
+                        f"trainer_type {', '.join(not_ppo)}. Run it as one rank (srun -n 1, or without "
+                        "torchrun), or use PPO (docs/cluster.md).")
     return PoolSettings(
         env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
         num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,

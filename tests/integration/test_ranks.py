@@ -120,3 +120,19 @@ def test_a_rank_that_dies_ends_the_run_with_rank_0s_checkpoint(tmp_path, env_no_
     assert "another rank is gone" in text
     assert _step_of(tmp_path / "results" / "ranks" / "Basic" / "checkpoint.pt") >= 1000
     assert (tmp_path / "results" / "ranks" / "Basic.onnx").is_file()
+
+
+def test_sac_under_two_ranks_is_one_message_and_exit_2(tmp_path, env_no_proxy):
+    """Ranks average PPO gradients only: a SAC config under WORLD_SIZE=2 is refused at start,
+    before a simulator or a results folder exists."""
+    cfg = tmp_path / "sac.yaml"
+    cfg.write_text("behaviors:\n  Basic:\n    trainer_type: sac\n    max_steps: 100\n")
+    args = [str(cfg), "--env", "stub:basic", "--run-id", "sac", "--results-dir", str(tmp_path / "results"),
+            "--base-port", str(free_port_block(2))]
+    r = subprocess.run([sys.executable, "-m", "trainer.cli", *args], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=120, env={**_env(env_no_proxy), "RANK": "0", "WORLD_SIZE": "2",
+                                         "MASTER_ADDR": "127.0.0.1", "MASTER_PORT": str(free_port_block(1))})
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert "average PPO gradients only" in r.stderr and "trainer_type sac" in r.stderr, r.stderr[-2000:]
+    assert "Traceback" not in r.stderr
+    assert not (tmp_path / "results" / "sac").exists()

@@ -172,8 +172,11 @@ class SACTrainer:
         h = self.hyperparams
         return decay(h.learning_rate_schedule, h.learning_rate, LEARNING_RATE_FLOOR, self.step, h.max_steps)
 
-    def update(self) -> dict[str, float]:
-        """Gradient steps until they caught up with the agent steps (one per steps_per_update)."""
+    def update(self, rows: int | None = None) -> dict[str, float]:
+        """Gradient steps until they caught up with the agent steps (one per steps_per_update).
+
+        ``rows`` is the data-parallel ranks' agreed buffer length (trainer/distributed.py); SAC
+        runs as one rank only (several are refused at start), where it is always None."""
         learning_rate = self.learning_rate()
         for optimizer in (self.policy_optimizer, self.value_optimizer, self.entropy_optimizer):
             optimizer.param_groups[0]["lr"] = learning_rate
