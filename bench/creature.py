@@ -37,6 +37,8 @@ from unity_stub_env.evaluate import load_policy
 from unity_stub_env.tasks import EnvironmentParameters, make_task
 from unity_stub_env.tasks.creature import KINDS, SUBSTEPS, run_policy
 
+from dodge_steps import best_of  # noqa: E402  (bench/ is the script's folder on sys.path)
+
 OUT = Path(__file__).resolve().parent / "out"
 
 
@@ -46,15 +48,6 @@ def _params(kind: str, creature_seed: int, roughness: float = 0.0) -> Environmen
     params.set("creature_seed", lambda: float(creature_seed))
     params.set("terrain_roughness", lambda: roughness)
     return params
-
-
-def best_of(block, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        block()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def measure_steps(areas: int, steps: int, repeats: int, kind: str, creature_seed: int) -> dict:
