@@ -201,6 +201,7 @@ class Dropped(NamedTuple):
     count: int  # deciding and finished agents left out
     deciding: int  # deciding agents the simulator sent: it is owed one action row for each
     kept: np.ndarray  # int positions, among those, of the rows DecisionSteps holds
+    ended: np.ndarray  # int64 agent (episode) ids of finished agents left out: their episodes end unseen
 
 
 class NotAMessageError(ProtocolError):
@@ -333,7 +334,8 @@ def _drop_non_finite(behavior: str, fields: records.Decoded) -> tuple[records.De
         reward=fields.reward[ok], group_reward=fields.group_reward[ok], agent_id=fields.agent_id[ok],
         group_id=fields.group_id[ok], done=fields.done[ok], max_step=fields.max_step[ok],
         obs=[o[ok] for o in fields.obs], mask=fields.mask[ok])
-    return kept, Dropped(int(n - ok.sum()), int(deciding.sum()), np.flatnonzero(ok[deciding]))
+    return kept, Dropped(int(n - ok.sum()), int(deciding.sum()), np.flatnonzero(ok[deciding]),
+                         fields.agent_id[~ok & fields.done].astype(np.int64))
 
 
 def _network_shape(spec: BehaviorSpec) -> tuple:
