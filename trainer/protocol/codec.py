@@ -181,6 +181,13 @@ def _brief(values: Sequence[int]) -> str:
 
 def _action_spec_from_proto(brain_params) -> ActionSpec:
     spec = brain_params.action_spec
+    if spec.num_discrete_actions != len(spec.discrete_branch_sizes):  # ML-Agents fills both from one list
+        raise ProtocolError(
+            f"Behavior {brain_params.brain_name!r} declares {spec.num_discrete_actions} discrete branches "
+            f"but lists {len(spec.discrete_branch_sizes)} branch sizes "
+            f"{_brief(spec.discrete_branch_sizes)}: its action specification contradicts itself, so "
+            "the trainer cannot tell which actions it expects. The simulator does not fill its brain "
+            "parameters as ML-Agents does; fix how it builds them.")
     if spec.num_continuous_actions == 0 and spec.num_discrete_actions == 0:
         # communication API < 1.3 only fills the deprecated fields
         sizes = tuple(brain_params.vector_action_size_deprecated)

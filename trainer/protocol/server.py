@@ -470,6 +470,8 @@ class UnityEndpoint:
                 f"{error}; is it an ML-Agents environment speaking communication API 1.x? "
                 "Rebuild it with the ML-Agents package of Release 22."
             ) from None
+        except ProtocolError as error:  # the codec names the behavior and the fault; say which simulator
+            raise ProtocolError(f"The simulator{self._for()} on port {self.port}: {error}") from None
         status = decoded.message.header.status
         if status != STATUS_OK:
             self._answer(_status_message(STATUS_CLOSING))
