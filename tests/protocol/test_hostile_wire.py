@@ -218,6 +218,29 @@ def _exchange_error(stub, message):
     return None
 
 
+def test_closed_transports_hold_no_read_buffer_even_when_something_still_refers_to_them():
+    """A restarted simulator's transport is closed, but the traceback of the error that ended
+    the simulator can keep it alive until Python's next full collection; each one used to hold
+    its 1 MiB read buffer meanwhile (the soak's trainer grew ~1 MB per simulator kill)."""
+    kept = []
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        for _ in range(10):
+            t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+            t.start()
+            good = GoodClient(t)
+            assert good.call(b"m1") == b"ok"  # a session, as a simulator's
+            good.close()
+            t.close(grace=0.1)
+            kept.append(t)  # still referenced, as by a traceback
+        held = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert held < 2 << 20, held  # was 11.7 MB: 1 MiB each + the test clients; now 1.2 MB
+    assert all(t.session is None for t in kept)
+
+
 # ------------------------------------------------------------------ idle connections, slow-loris
 def test_idle_connections_are_capped_and_hold_no_read_buffer_each(transport, caplog):
     good = GoodClient(transport)
