@@ -51,6 +51,7 @@ class Academy:
         n = task.num_agents
         self.episode_ids = np.zeros(n, dtype=np.int64)
         self.pending_reward = np.zeros(n, dtype=np.float32)
+        self.pending_group_reward = np.zeros(n, dtype=np.float32)  # tasks with TaskStep.group_rewards
         self.continuous = np.zeros((n, task.action_spec.continuous_size), dtype=np.float32)
         self.discrete = np.zeros((n, len(task.action_spec.discrete_branches)), dtype=np.int32)
         self.pending_done_infos = EncodedInfos()
@@ -64,6 +65,7 @@ class Academy:
         self.task.reset()
         self.episode_ids[:] = self.episode_counter.take(self.task.num_agents)
         self.pending_reward[:] = 0.0
+        self.pending_group_reward[:] = 0.0
         self.continuous[:] = 0.0
         self.discrete[:] = 0
         self.pending_done_infos = EncodedInfos()
@@ -75,11 +77,12 @@ class Academy:
         decisions = encode_agent_infos(
             task.observation_specs, task.observe(), self.pending_reward, self.episode_ids,
             done=False, action_mask=task.action_mask(), compressions=task.observation_compressions,
-            group_ids=task.group_ids(),
+            group_ids=task.group_ids(), group_rewards=self.pending_group_reward,
         )
         infos = self.pending_done_infos + decisions
         self.pending_done_infos = EncodedInfos()
         self.pending_reward[:] = 0.0
+        self.pending_group_reward[:] = 0.0
         return infos
 
     def collect_infos(self) -> list[agent_info_pb2.AgentInfoProto]:
@@ -141,6 +144,8 @@ class Academy:
             else:
                 self.pending_reward += result.rewards
             self.pending_stats.extend(result.stats)
+            if result.group_rewards is not None:  # AddGroupReward: summed until the next decision
+                self.pending_group_reward += result.group_rewards
             done = result.done if restarted is None else result.done & ~restarted
             if done.any():
                 self._end_episodes(done, result.interrupted)
@@ -155,12 +160,14 @@ class Academy:
             task.observation_specs, observations, self.pending_reward[done], self.episode_ids[done],
             done=True, interrupted=interrupted[done], compressions=task.observation_compressions,
             group_ids=None if groups is None else groups[done],
+            group_rewards=self.pending_group_reward[done],
         )
         finished = int(done.sum())
         self.completed_episodes += finished
         if self.completed_episodes // 100 != (self.completed_episodes - finished) // 100:
             logger.info("%d episodes completed", self.completed_episodes)
         self.pending_reward[done] = 0.0
+        self.pending_group_reward[done] = 0.0
         task.reset(done)
         self.episode_ids[done] = self.episode_counter.take(finished)
         self.continuous[done] = 0.0
