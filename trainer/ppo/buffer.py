@@ -26,10 +26,29 @@ class Trajectory:
     interrupted: bool  # the episode ended by max_step_reached: bootstrap anyway
     episode: Any = None  # identifies the agent's episode across its trajectories (per-episode sums)
     memories: np.ndarray | None = None  # float32 [T, memory_size]: each action's input memory (LSTM)
+    group: "GroupColumns | None" = None  # the agent's teammates (rollout.GroupTracker; POCA), else None
 
     def __len__(self) -> int:
         return int(self.rewards.shape[0])
 
+
+@dataclass
+class GroupColumns:
+    """What an agent's teammates did beside each of its T steps, M teammate slots (padding where
+    ``present`` is False): the same step's observation and action of each teammate, and at the end
+    the teammates' observations after the last step and whether all of them were done then."""
+
+    obs: list[np.ndarray]  # per observation, float32 [T, M, *shape]
+    continuous_actions: np.ndarray  # float32 [T, M, c]
+    discrete_actions: np.ndarray  # int [T, M, b]
+    present: np.ndarray  # bool [T, M]
+    next_obs: list[np.ndarray]  # per observation, float32 [M2, *shape]: the teammates after the last step
+    next_present: np.ndarray  # bool [M2]
+    all_done: bool  # every teammate's episode had ended at the last step (True without teammates)
+
+    @property
+    def width(self) -> int:
+        return int(self.present.shape[1])
 
 class UpdateBuffer:
     """Experiences waiting for the next PPO update: field name -> list of [T, ...] arrays."""
