@@ -45,7 +45,7 @@ SUBSTEPS = 5  # MuJoCo steps per control step (0.1 s)
 GOAL_Y = 1.2  # the block's centre at y >= GOAL_Y is in the goal zone
 FLOOR_HALF = 2.5  # an agent beyond |x| or |y| > FLOOR_HALF has left the floor
 START_Y = -0.6
-MAX_STEP = 150
+MAX_STEP = 80
 TIME_PENALTY = -0.5 / MAX_STEP
 SUCCESS_REWARD = 1.0
 LEAVE_REWARD = -1.0  # individual: without it, leaving early dodged the time penalty (measured: episodes
