@@ -188,3 +188,13 @@ def test_poca_updates_and_its_checkpoint_round_trips():
     again.load_state_dict(trainer.state_dict())
     for a, b in zip(again.critic.state_dict().values(), trainer.critic.state_dict().values()):
         assert torch.equal(a, b)
+
+
+def test_poca_with_memory_is_refused_before_the_run():
+    from trainer.config.settings import MemorySettings, NetworkSettings, POCASettings, TrainerSettings
+    from trainer.config.support import unsupported
+
+    settings = TrainerSettings(trainer_type="poca", hyperparameters=POCASettings(),
+                               network_settings=NetworkSettings(memory=MemorySettings()))
+    assert [key for key, _ in unsupported(settings)] == ["network_settings.memory"]
+    assert unsupported(TrainerSettings(trainer_type="poca", hyperparameters=POCASettings())) == []
