@@ -44,8 +44,14 @@ DOCUMENTED_SPECS = {
                                "name": "VectorSensor_size298"}],
         "action_spec": {"continuous_size": 34, "discrete_branches": []},
     }},
+    "pushblock": {"PushBlock?team=0": {
+        "observation_specs": [{"shape": [11], "dimension_property": [1], "observation_type": 0,
+                               "name": "VectorSensor_size11"}],
+        "action_spec": {"continuous_size": 0, "discrete_branches": [5]},
+    }},
 }
-AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14, "mimic": 8, "runner": 4, "creature": 1}  # agents per area; one area by default
+AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14, "mimic": 8, "runner": 4, "creature": 1,
+          "pushblock": 2}  # agents per area; one area by default
 STEPS = 500
 
 
