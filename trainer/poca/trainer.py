@@ -139,9 +139,9 @@ class POCATrainer(PPOTrainer):
         if width <= self.group_width:
             return
         self.group_width = width
-        for name, arrays in self.buffer._fields.items():
+        for name in self.buffer.field_names:
             if name in GROUP_FIELDS or name.startswith("mates_obs_"):
-                arrays[:] = [pad_mates(a, width) for a in arrays]
+                self.buffer.rewrite(name, lambda array: pad_mates(array, width))
 
     # ------------------------------------------------------------------ update
     def _minibatch_loss(self, batch: dict[str, torch.Tensor], beta: float, epsilon: float

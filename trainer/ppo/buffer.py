@@ -71,6 +71,17 @@ class UpdateBuffer:
             self._fields.setdefault(name, []).append(array)
         self._length += next(iter(lengths.values()), 0)
 
+    def rewrite(self, name: str, fn) -> None:
+        """Replace every buffered array of field ``name`` by ``fn(array)`` (same leading length;
+        POCA pads its teammate columns when a wider group arrives)."""
+        arrays = self._fields.get(name)
+        if arrays is not None:
+            arrays[:] = [fn(array) for array in arrays]
+
+    @property
+    def field_names(self) -> list[str]:
+        return list(self._fields)
+
     def concatenated(self) -> dict[str, np.ndarray]:
         """All buffered experiences, field name -> array [len(self), ...]."""
         return {name: np.concatenate(arrays, axis=0) for name, arrays in self._fields.items()}
