@@ -293,9 +293,10 @@ class GroupTracker(AgentTracker):
     ``group_id`` > 0 in the same simulator) did at that step, as ML-Agents' AgentProcessor
     assembles group trajectories for MA-POCA (docs/poca.md):
 
-    - a teammate's status at a step is the observation it acted on and the action it took, from
-      every agent of the group whose pending decision this message closes (its terminal or its
-      next decision); an agent that left the group is no longer a teammate from the next message;
+    - a teammate's status at a step is the observation it acted on, the action it took and the
+      individual reward that came for it, from every agent of the group whose pending decision
+      this message closes (its terminal or its next decision); an agent that left the group is no
+      longer a teammate from the next message;
     - a trajectory's ``group.next_obs`` are the teammates' observations in the message that ends
       it, and ``group.all_done`` says whether every teammate's episode ended in it too: only then
       is the group's episode over and the value not bootstrapped;
@@ -308,7 +309,7 @@ class GroupTracker(AgentTracker):
         self._ends: dict[int, tuple[list[list[np.ndarray]], bool]] = {}  # agent -> (next obs of mates, all done)
 
     def on_step(self, ts: TerminalSteps, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
-        statuses: dict[int, dict[int, tuple]] = {}  # group -> agent -> (obs, cont, disc, done)
+        statuses: dict[int, dict[int, tuple]] = {}  # group -> agent -> (obs, cont, disc, done, reward)
         current: dict[int, dict[int, list[np.ndarray]]] = {}  # group -> agent -> observations now
         closing: list[tuple[int, int, int]] = []  # (agent, group, slot) of every pending decision closed now
         for steps, done in ((ts, True), (ds, False)):
@@ -323,7 +324,8 @@ class GroupTracker(AgentTracker):
                 closing.append((agent, group, slot))
                 if group > 0:
                     statuses.setdefault(group, {})[agent] = (
-                        [buf[slot, t] for buf in self.obs], self.cont[slot, t], self.disc[slot, t], done)
+                        [buf[slot, t] for buf in self.obs], self.cont[slot, t], self.disc[slot, t], done,
+                        float(steps.reward[k]))
                     current.setdefault(group, {})[agent] = [o[k] for o in steps.obs]
         self._ends = {}
         for agent, group, slot in closing:
@@ -353,18 +355,19 @@ class GroupTracker(AgentTracker):
         cont = np.zeros((n, width, a.continuous_size), np.float32)
         disc = np.zeros((n, width, a.discrete_size), np.int32)
         present = np.zeros((n, width), bool)
+        rewards = np.zeros((n, width), np.float32)
         for t, mates in enumerate(rows):
-            for m, (mate_obs, mate_cont, mate_disc, _) in enumerate(mates):
+            for m, (mate_obs, mate_cont, mate_disc, _, mate_reward) in enumerate(mates):
                 for i, o in enumerate(mate_obs):
                     obs[i][t, m] = o
-                cont[t, m], disc[t, m], present[t, m] = mate_cont, mate_disc, True
+                cont[t, m], disc[t, m], present[t, m], rewards[t, m] = mate_cont, mate_disc, True, mate_reward
         next_obs_mates = [np.zeros((width, *shape), np.float32) for shape in shapes]
         next_present = np.zeros(width, bool)
         for m, mate in enumerate(mates_now):
             for i, o in enumerate(mate):
                 next_obs_mates[i][m] = o
             next_present[m] = True
-        traj.group = GroupColumns(obs, cont, disc, present, next_obs_mates, next_present, bool(all_done))
+        traj.group = GroupColumns(obs, cont, disc, present, rewards, next_obs_mates, next_present, bool(all_done))
         return traj
 
     def drop_all(self) -> None:

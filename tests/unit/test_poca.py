@@ -66,9 +66,10 @@ def test_baseline_ignores_teammate_order_and_padding_and_sees_teammates_actions(
 
 
 # ------------------------------------------------------------------------------ assembly
-def ds(ids, obs, groups, group_reward=0.0):
+def ds(ids, obs, groups, group_reward=0.0, reward=None):
     n = len(ids)
-    return DecisionSteps(obs=[np.array(obs, np.float32).reshape(n, 2)], reward=np.zeros(n, np.float32),
+    reward = np.zeros(n, np.float32) if reward is None else np.array(reward, np.float32)
+    return DecisionSteps(obs=[np.array(obs, np.float32).reshape(n, 2)], reward=reward,
                          agent_id=np.array(ids, np.int64), action_mask=None, group_id=np.array(groups, np.int32),
                          group_reward=np.full(n, group_reward, np.float32))
 
@@ -94,8 +95,9 @@ def test_teammates_columns_and_an_agent_that_leaves_before_its_group():
     tr = GroupTracker(SPEC, time_horizon=10)
     # step 0: agents 1 and 2 of group 7 decide; agent 3 has no group
     act(tr, tr.on_step(NONE, ds([1, 2, 3], [[1, 0], [2, 0], [3, 0]], [7, 7, 0]), out.append), [1, 2, 0])
-    # step 1: all continue (group reward 0.5)
-    act(tr, tr.on_step(NONE, ds([1, 2, 3], [[1, 1], [2, 1], [3, 1]], [7, 7, 0], 0.5), out.append), [0, 1, 2])
+    # step 1: all continue (group reward 0.5; agent 2's own reward 0.3)
+    act(tr, tr.on_step(NONE, ds([1, 2, 3], [[1, 1], [2, 1], [3, 1]], [7, 7, 0], 0.5, [0, 0.3, 0]), out.append),
+        [0, 1, 2])
     # step 2: agent 2 leaves (its episode ends, group 7 goes on with agent 1)
     act(tr, tr.on_step(ts([2], [[2, 2]], [7], 0.25), ds([1, 3], [[1, 2], [3, 2]], [7, 0], 0.25), out.append), [2, 1])
     assert len(out) == 1
@@ -118,6 +120,8 @@ def test_teammates_columns_and_an_agent_that_leaves_before_its_group():
     # agent 2 was its teammate for steps 0 and 1 only (it acted at step 1, then it was gone)
     np.testing.assert_array_equal(last.group.present, [[True], [True], [False]])
     np.testing.assert_array_equal(last.group.obs[0][:, 0], [[2, 0], [2, 1], [0, 0]])
+    np.testing.assert_allclose(last.group.rewards[:, 0], [0.3, 0, 0])  # agent 2's own rewards
+    np.testing.assert_allclose(left.group.rewards[:, 0], [0, 0])
     assert lonely.group.width == 0 and lonely.group.all_done
     # group rewards 0.5 + 0.25 + 1.0 of agent 1 (the only one there when its group finished); agent 3
     # without a group counts as a finished group of its own, as in the reference
@@ -139,7 +143,8 @@ def test_lambda_returns_are_gae_returns_by_hand():
 def trajectory(done, interrupted, all_done):
     n = 3
     group = GroupColumns([np.zeros((n, 1, 2), np.float32)], np.zeros((n, 1, 1), np.float32), np.zeros((n, 1, 1), np.int32),
-                         np.ones((n, 1), bool), [np.zeros((1, 2), np.float32)], np.ones(1, bool), all_done)
+                         np.ones((n, 1), bool), np.array([[0.5], [0.0], [0.0]], np.float32),
+                         [np.zeros((1, 2), np.float32)], np.ones(1, bool), all_done)
     return Trajectory(obs=[np.zeros((n, 2), np.float32)], next_obs=[np.zeros(2, np.float32)],
                       rewards=np.array([1.0, 0.0, 2.0], np.float32), continuous_actions=np.zeros((n, 1), np.float32),
                       discrete_actions=np.zeros((n, 1), np.int64), log_probs=np.zeros((n, 2), np.float32),
@@ -160,9 +165,10 @@ def test_returns_advantages_and_the_group_bootstrap(monkeypatch, done, interrupt
         {"extrinsic": values}, {"extrinsic": baselines}, {"extrinsic": 2.0}))
     trainer.process_trajectory(trajectory(done, interrupted, all_done))
     fields = trainer.buffer.concatenated()
+    # rewards 1, 0, 2 plus the teammate's own 0.5 at step 0
     g2 = 2 + 0.9 * bootstrap
     g1 = 0.9 * (0.2 * 1.5 + 0.8 * g2)
-    g0 = 1 + 0.9 * (0.2 * 1.0 + 0.8 * g1)
+    g0 = 1.5 + 0.9 * (0.2 * 1.0 + 0.8 * g1)
     np.testing.assert_allclose(fields["returns:extrinsic"], [g0, g1, g2], rtol=1e-6)
     np.testing.assert_allclose(fields["advantages"], np.array([g0, g1, g2]) - baselines, rtol=1e-6)
     assert fields["mates_present"].shape == (3, 1)
@@ -177,7 +183,8 @@ def test_poca_updates_and_its_checkpoint_round_trips():
         traj = trajectory(False, False, False)
         traj.group = GroupColumns([rng.normal(size=(3, width, 2)).astype(np.float32)], np.zeros((3, width, 1), np.float32),
                                   np.zeros((3, width, 1), np.int32), np.ones((3, width), bool),
-                                  [np.zeros((width, 2), np.float32)], np.ones(width, bool), False)
+                                  np.zeros((3, width), np.float32), [np.zeros((width, 2), np.float32)],
+                                  np.ones(width, bool), False)
         trainer.process_trajectory(traj)
     assert trainer.ready_to_update() and trainer.group_width == 2
     before = [p.detach().clone() for p in trainer.critic.parameters()]

@@ -5,6 +5,8 @@ actor and its sampling, the update buffer and minibatches, Adam, the schedules, 
 checkpoints and the ONNX export of the actor. Per trajectory (rollout.GroupTracker adds the
 teammates' columns) and reward signal:
 
+* the extrinsic reward of a step is the agent's reward and group reward plus its teammates' own
+  rewards of that step (as the reference's extrinsic signal with POCA);
 * values V_t of the group (the agent and the teammates present at t) and the bootstrap V of the
   group after the last step; the group's episode is over (no bootstrap) only when the agent's
   episode ended, every teammate's had too and none was interrupted. An agent that leaves before
@@ -19,6 +21,7 @@ teammates' columns) and reward signal:
 """
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -55,7 +58,7 @@ def lonely_group(traj: Trajectory, spec: BehaviorSpec) -> GroupColumns:
     n, a = len(traj), spec.action_spec
     shapes = [tuple(o.shape) for o in spec.observation_specs]
     return GroupColumns([np.zeros((n, 0, *s), np.float32) for s in shapes], np.zeros((n, 0, a.continuous_size), np.float32),
-                        np.zeros((n, 0, a.discrete_size), np.int32), np.zeros((n, 0), bool),
+                        np.zeros((n, 0, a.discrete_size), np.int32), np.zeros((n, 0), bool), np.zeros((n, 0), np.float32),
                         [np.zeros((0, *s), np.float32) for s in shapes], np.zeros(0, bool), True)
 
 
@@ -99,6 +102,8 @@ class POCATrainer(PPOTrainer):
         """Normalise, estimate values and baselines, lambda returns and advantages per reward
         signal (module docstring), and buffer the experiences with their teammates' columns."""
         group = traj.group if traj.group is not None else lonely_group(traj, self.behavior_spec)
+        if group.width:  # the teammates' own rewards join the extrinsic reward (curiosity / rnd ignore it)
+            traj = dataclasses.replace(traj, rewards=(traj.rewards + group.rewards.sum(axis=1)).astype(np.float32))
         if self.hyperparams.normalize:
             obs_tensors = self._tensors(traj.obs)
             self.policy.actor.update_normalization(obs_tensors)

@@ -35,13 +35,15 @@ class Trajectory:
 @dataclass
 class GroupColumns:
     """What an agent's teammates did beside each of its T steps, M teammate slots (padding where
-    ``present`` is False): the same step's observation and action of each teammate, and at the end
-    the teammates' observations after the last step and whether all of them were done then."""
+    ``present`` is False): the same step's observation, action and individual reward of each
+    teammate, and at the end the teammates' observations after the last step and whether all of
+    them were done then."""
 
     obs: list[np.ndarray]  # per observation, float32 [T, M, *shape]
     continuous_actions: np.ndarray  # float32 [T, M, c]
     discrete_actions: np.ndarray  # int [T, M, b]
     present: np.ndarray  # bool [T, M]
+    rewards: np.ndarray  # float32 [T, M]: each teammate's own reward for that step (0 where absent)
     next_obs: list[np.ndarray]  # per observation, float32 [M2, *shape]: the teammates after the last step
     next_present: np.ndarray  # bool [M2]
     all_done: bool  # every teammate's episode had ended at the last step (True without teammates)
