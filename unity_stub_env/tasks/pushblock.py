@@ -2,8 +2,9 @@
 
 Each area (``pushblock.xml`` beside this file) holds two agents and a block on a 5 x 5 m floor; the
 two agents of an area form one agent group (group id = area index + 1, sent on the wire). The block
-is too heavy for one agent: its joints' dry friction (14 N) exceeds one agent's force (10 N), two
-agents pushing together move it at 0.375 m/s (the XML says how). Everything slides in the plane.
+reaches the goal in time only when both push: its joints' dry friction (9 N) leaves one agent's
+force (10 N) little to move it with (0.09 m/s), two agents pushing together move it at 0.69 m/s
+(the XML says how). Everything slides in the plane.
 
 Actions, one discrete branch of 5: 0 = no force, 1 = +y (towards the goal), 2 = -y, 3 = +x, 4 = -x.
 A decision every control step of 0.1 s (5 MuJoCo steps of 0.02 s).
@@ -18,15 +19,17 @@ Start: the block at (U(-0.3, 0.3), 0); agent 0 at (block x - U(0.15, 0.45), -0.6
 Rewards are group rewards (every agent of the area receives them), except for leaving the floor:
   every step  -0.5 / max_step (hurry)  +  (block y after - block y before) / GOAL_Y (progress)
   success     +1 when the block's centre reaches y >= GOAL_Y; the group's episode ends (done).
-  timeout     after max_step = 150 steps the group's episode is interrupted (all agents).
+  timeout     after max_step = 80 steps (8 s) the group's episode is interrupted (all agents).
 An agent that leaves the floor (|x| or |y| > 2.5 m) gets an individual reward of -1 and ends its
-own episode early (done, the group goes on) and starts a new one at its start spot in the same group; it does not see the group's
-later rewards in that ended episode (the trainer's POCA critic credits them, docs/poca.md). When
-both agents of an area have left in the same step, the area starts over (block included).
+own episode early (done, the group goes on); it starts a new one at its start spot in the same
+group and does not see the group's later rewards in the episode that ended (the trainer's POCA
+critic credits them, docs/poca.md). When both agents of an area have left in the same step, the
+area starts over (block included).
 
-Measured: both pushing +y all the way reach the goal in 35 steps, group return
-1.2 / 1.2 + 1 - 35 * 0.5 / 150 = 1.91; a still policy returns -0.5 (the whole timeout); one agent
-pushing alone for the whole timeout creeps the block 0.09 m (the solver's soft friction): -0.42.
+Measured (tests/stub/test_stub_pushblock.py): both pushing +y all the way reach the goal in 22
+steps, group return ~1.2 / 1.2 + 1 - 22 * 0.5 / 80 = 1.86 (1.875 with the last step's overshoot);
+a still policy returns -0.5 (the whole timeout); one agent pushing alone for the whole timeout
+moves the block 0.79 m, short of the goal.
 """
 from __future__ import annotations
 
@@ -75,8 +78,8 @@ class PushBlockTask(Task):
     max_step = MAX_STEP
     decision_period = 1
     sets_reward = False
-    description = ("2 agents per area (one group) push a block too heavy for one into a goal zone; "
-                   "group rewards; both pushing: group return 1.91, standing still -0.50.")
+    description = ("2 agents per area (one group) push a block into a goal zone, in time only together; "
+                   "group rewards; both pushing: group return 1.875, standing still -0.50.")
 
     def __init__(self, num_areas: int, seed: int, env_params: EnvironmentParameters | None = None):
         super().__init__(num_areas, seed, env_params)
