@@ -318,7 +318,7 @@ class RunState:
                 self.reporter.add_many(brain, "Policy/Extrinsic Reward", paid, StatsAggregationMethod.AVERAGE)
         if eps.group_returns:  # GroupTracker (POCA): agents whose whole group had finished with them
             self.reporter.add_many(brain, "Environment/Group Cumulative Reward", np.asarray(eps.group_returns, np.float64),
-                                   StatsAggregationMethod.AVERAGE)
+                                   StatsAggregationMethod.HISTOGRAM)  # as the reference: the mean and a histogram
 
     # ------------------------------------------------------------------ learning
     def learn(self, trajectories: list) -> None:
