@@ -8,7 +8,8 @@ PPO gets the same group rewards (the rollout adds them to each agent's reward) b
 one agent only and its advantages carry no counterfactual baseline. Reported per trainer and seed,
 read back from TensorBoard: ``PushBlock/Success`` (the fraction of group episodes that brought the
 block home) and ``Policy/Extrinsic Reward`` (each agent's episode return, group rewards included) at
-every summary; the table gives the mean of the last 3 summaries. JSON to ``<out>/poca_vs_ppo.json``.
+every summary; the table gives the first summary step with a success rate >= 0.9 and the mean of
+the last 3 summaries. JSON to ``<out>/poca_vs_ppo.json``.
 """
 from __future__ import annotations
 
@@ -65,12 +66,13 @@ def main() -> None:
             for trainer_type in results:
                 results[trainer_type][seed] = run(trainer_type, seed, args.max_steps, args.num_areas, Path(tmp))
     print(f"pushblock, {args.max_steps} steps, {args.num_areas} areas; mean of the last 3 summaries")
-    print("| trainer | seed | PushBlock/Success | Policy/Extrinsic Reward |")
-    print("|---|---|---|---|")
+    print("| trainer | seed | first step with success >= 0.9 | PushBlock/Success | Policy/Extrinsic Reward |")
+    print("|---|---|---|---|---|")
     for trainer_type, by_seed in results.items():
         for seed, curves in by_seed.items():
             last = [statistics.mean(v for _, v in curves[tag][-3:]) for tag in TAGS]
-            print(f"| {trainer_type} | {seed} | {last[0]:.3f} | {last[1]:.3f} |")
+            first = next((step for step, v in curves[TAGS[0]] if v >= 0.9), None)
+            print(f"| {trainer_type} | {seed} | {first or 'never'} | {last[0]:.3f} | {last[1]:.3f} |")
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "poca_vs_ppo.json"), "w") as stream:
         json.dump({"args": vars(args), "results": results}, stream, indent=1)
