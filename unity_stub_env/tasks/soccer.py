@@ -18,7 +18,7 @@ PLAYER_FORCE along each chosen axis (joint damping makes PLAYER_SPEED the top sp
 Rewards: -TIME_PENALTY every control step; at a goal +1 for the scorer, -1 for the other player,
 and the episode ends for both. After ``max_step`` control steps the episode is interrupted (a
 draw, which ML-Agents' self-play does not rate). One control step is 0.04 s (2 MuJoCo steps of
-0.02 s), a decision every 2.
+0.02 s), a decision every 5 (0.2 s).
 
 Start of an episode: each player on its own half (x = -START_X in its frame, y uniform in +-0.5),
 the ball at rest near the centre (uniform in +-0.3 x +-0.5). Deterministic for a seed and actions.
@@ -54,7 +54,7 @@ TIMESTEP = 0.02
 SUBSTEPS = 2
 START_X = 1.0
 GOAL_REWARD = 1.0
-MAX_STEP = 300
+MAX_STEP = 250
 TIME_PENALTY = 0.5 / MAX_STEP  # a whole episode without a goal costs 0.5
 
 _DIRECTION = np.array([0.0, 1.0, -1.0])  # per action: stay, forward/left, back/right
@@ -113,7 +113,7 @@ class SoccerTask(Task):
     action_spec = ActionSpec(continuous_size=0, discrete_branches=(3, 3))
     agents_per_area = AGENTS_PER_AREA
     max_step = MAX_STEP
-    decision_period = 2
+    decision_period = 5
     sets_reward = False
     description = ("MuJoCo 1 v 1 ball game, behaviors Soccer?team=0 and Soccer?team=1 (self-play); "
                    "+1 / -1 at a goal, interrupted (a draw) at max_step.")
@@ -212,3 +212,25 @@ class SoccerTask(Task):
             stats = [("Soccer/Goal Scored", float(g), StatsAggregationMethod.AVERAGE)
                      for g in goal[done_area].tolist()]
         return TaskStep(rewards.astype(np.float32), done, interrupted, stats)
+
+
+def play_match(task: SoccerTask, team0, team1, decisions: int) -> tuple[int, int, int]:
+    """Play ``decisions`` decisions on every pitch of ``task``; ``team0`` / ``team1`` map the
+    observations of that team's players (float32 [areas, 12]) to actions (int [areas, 2]).
+    Returns team 0's (wins, losses, draws): goals for, goals against, episodes interrupted."""
+    wins = losses = draws = 0
+    actions = np.zeros((task.num_agents, 2), dtype=np.int64)
+    for _ in range(decisions):
+        obs = task.observe()[0]
+        actions[0::2] = team0(obs[0::2])
+        actions[1::2] = team1(obs[1::2])
+        for _ in range(task.decision_period):
+            result = task.step(np.zeros((task.num_agents, 0), np.float32), actions)
+            if result.done.any():
+                ended = result.done[0::2]
+                reward, timeout = result.rewards[0::2][ended], result.interrupted[0::2][ended]
+                wins += int((reward > 0).sum())
+                losses += int(((reward < 0) & ~timeout).sum())
+                draws += int(timeout.sum())
+                task.reset(result.done)
+    return wins, losses, draws
