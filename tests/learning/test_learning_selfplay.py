@@ -4,11 +4,12 @@ separate process over real gRPC, 16 pitches, seed 1, a bounded number of steps.
 configs/soccer.yaml cut to 60,000 steps. Two numbers a user would look at:
 
 * ``Self-play/ELO`` in TensorBoard (the learning policy's rating against its own snapshots,
-  initial_elo 1200, ML-Agents' update without a K factor: at most 1 point per game). Measured
-  (seed 1, 100k steps): 1201 at the first summary, 1237 at 60k, 1295 at 100k.
+  initial_elo 1200, ML-Agents' update without a K factor: at most 1 point per game). Measured at
+  the first and the last summary: seed 1 1201.5 -> 1237.3, seed 2 1200.4 -> 1241.8 (and 1323 after
+  the full 200k steps, bench/RESULTS.md).
 * The exported ONNX (deterministic) against a player choosing uniformly at random, on the task
-  itself (``soccer.play_match``): measured 864 goals for, 5 against in 1,500 decisions x 16
-  pitches after 100k steps; random against random scores about evenly.
+  itself (``soccer.play_match``, 16 pitches, 1,000 decisions): measured 379 goals for, 0 against
+  (seed 1) and 385 : 1 (seed 2); random against random scores about evenly (17 : 16 in 400).
 
 Thresholds: ELO at the last summary >= 1215 (+15), and the trained policy scores at least 5
 times as many goals as it concedes against the random player, with >= 100 goals.
