@@ -113,7 +113,9 @@ class SelfPlay:
         self.snapshot_counter = 0
         # ratings of the window's snapshots, the last entry the learning policy's (index -1)
         self.elos: list[float] = [float(settings.initial_elo)] * (self.window + 1)
-        self.current_opponent = -1  # index into elos of what the other teams play (-1: the latest)
+        # index into elos of what the other teams play (-1: the latest); until the first swap
+        # they play the first snapshot, the policy the run starts with
+        self.current_opponent = 0
         self.ghost_step = 0
         self.last_save = 0
         self.last_swap = 0
@@ -227,7 +229,7 @@ class SelfPlay:
             self._opponents[team] = policy
         weights = self._opponent_weights
         if weights is None:  # before the first swap: the snapshot the window starts with
-            weights = self.snapshots[self.current_opponent] if self.current_opponent >= 0 else self.snapshots[-1]
+            weights = self.snapshots[max(self.current_opponent, 0)]
         policy.actor.load_state_dict(weights)  # in place: the numpy actor's views see it
 
     # ------------------------------------------------------------------ checkpoints

@@ -217,3 +217,14 @@ def test_state_survives_a_checkpoint_file(tmp_path):
         sp.policy_for(1 - controller.learning_team).actor.state_dict())
     assert restored.rng.uniform() == sp.rng.uniform()  # the draws continue where they were
     assert not math.isnan(restored.current_elo)
+
+
+def test_before_the_first_swap_the_opponent_is_the_first_snapshot_and_rated_as_such():
+    sp, trainer, _ = layer(SelfPlaySettings(window=4, initial_elo=1200.0))
+    mark(trainer, 7.0)
+    sp.policy_for(0)
+    opponent = sp.policy_for(1)
+    mark(trainer, 8.0)  # the learner moves on
+    assert sp.current_opponent == 0 and marker(opponent.actor.state_dict()) == 7.0
+    assert sp.rate_trajectory(1.0, done=True, interrupted=False) == pytest.approx(1200.5)
+    assert sp.elos == pytest.approx([1199.5, 1200.0, 1200.0, 1200.0, 1200.5])
