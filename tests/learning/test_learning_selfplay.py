@@ -5,8 +5,8 @@ configs/soccer.yaml cut to 60,000 steps. Two numbers a user would look at:
 
 * ``Self-play/ELO`` in TensorBoard (the learning policy's rating against its own snapshots,
   initial_elo 1200, ML-Agents' update without a K factor: at most 1 point per game). Measured at
-  the first and the last summary: seed 1 1201.5 -> 1237.3, seed 2 1200.4 -> 1241.8 (and 1323 after
-  the full 200k steps, bench/RESULTS.md).
+  the first and the last summary: seed 1 1198.6 -> 1234.5, seed 2 1198.1 -> 1239.7 (and about 1320
+  after the full 200k steps, bench/RESULTS.md).
 * The exported ONNX (deterministic) against a player choosing uniformly at random, on the task
   itself (``soccer.play_match``, 16 pitches, 1,000 decisions): measured 379 goals for, 0 against
   (seed 1) and 385 : 1 (seed 2); random against random scores about evenly (17 : 16 in 400).
