@@ -3,7 +3,7 @@
 Per iteration (each simulator has just sent its message):
   1. new behaviors get a ``BehaviorRunner`` (trainer, checkpoint bookkeeping);
   2. ONE batched forward pass per behavior computes actions for all deciding agents across all
-     envs;
+     envs (the brain's policy, or with self-play a team's snapshot: ``BehaviorRunner.policy_for``);
   3. the actions go out at once, so the simulators step while we work;
   4. meanwhile every agent's experience is assembled (rollout.AgentTracker), trajectories go to
      PPO (GAE, update when the buffer is full), summaries, checkpoints, curriculum; then we wait
