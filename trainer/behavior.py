@@ -231,6 +231,9 @@ class BehaviorRunner:
             )
         step, path, state = chosen
         self._load_state(path, state, reset_step=False)
+        elo = status.get_elo(self.brain)
+        if self.self_play is not None and "SelfPlay" not in state and elo is not None:
+            self.self_play.start_from_elo(elo)  # e.g. a run of mlagents-learn: its rating, a new window
         self.tidy_after_resume(status)
 
     def tidy_after_resume(self, status: TrainingStatus) -> None:

@@ -247,6 +247,11 @@ class SelfPlay:
             "rng": json.dumps(self.rng.bit_generator.state),
         }
 
+    def start_from_elo(self, elo: float) -> None:
+        """--resume of a checkpoint without the layer's state (ML-Agents keeps only the rating, in
+        training_status.json): every rating starts from ``elo``; the window starts anew."""
+        self.elos = [float(elo)] * (self.window + 1)
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """--resume: the window, the ratings, the schedule and the learning team as saved."""
         elos = [float(x) for x in state["elos"].tolist()]

@@ -228,3 +228,27 @@ def test_before_the_first_swap_the_opponent_is_the_first_snapshot_and_rated_as_s
     assert sp.current_opponent == 0 and marker(opponent.actor.state_dict()) == 7.0
     assert sp.rate_trajectory(1.0, done=True, interrupted=False) == pytest.approx(1200.5)
     assert sp.elos == pytest.approx([1199.5, 1200.0, 1200.0, 1200.0, 1200.5])
+
+
+def test_resume_without_the_window_takes_the_elo_of_training_status(tmp_path):
+    """A checkpoint without ``SelfPlay`` (written by mlagents-learn, or before self_play was on):
+    --resume starts every rating from training_status.json's "elo", as ML-Agents does."""
+    from trainer.artifacts.training_status import TrainingStatus
+    from trainer.behavior import BehaviorRunner
+    from trainer.config.settings import TrainerSettings
+
+    settings = TrainerSettings(self_play=SelfPlaySettings(window=3))
+    first = BehaviorRunner.create("Soccer", SPEC, settings, str(tmp_path), seed=0, device="cpu", training=True)
+    save_checkpoint(first.paths.latest, first.trainer.state_dict())
+    status = TrainingStatus()
+    status.set_elo("Soccer", 1350.0)
+    runner = BehaviorRunner.create("Soccer", SPEC, settings, str(tmp_path), seed=0, device="cpu", training=True)
+    runner.resume(status)
+    assert runner.self_play.elos == [1350.0] * 4
+    # with the layer's state in the checkpoint, that state wins over training_status.json
+    runner.self_play.elos = [1.0, 2.0, 3.0, 1401.0]
+    runner.save_checkpoint(status)
+    again = BehaviorRunner.create("Soccer", SPEC, settings, str(tmp_path), seed=0, device="cpu", training=True)
+    status.set_elo("Soccer", 1350.0)
+    again.resume(status)
+    assert again.self_play.elos == [1.0, 2.0, 3.0, 1401.0]
