@@ -28,15 +28,15 @@ def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
             if name in SUPPORTED_REWARD_SIGNALS and name not in SAC_REWARD_SIGNALS:
                 found.append((f"reward_signals.{name}",
                               f"remove it; SAC trains with {', '.join(SAC_REWARD_SIGNALS)} only for now"))
+    if ts.trainer_type == "poca" and ts.network_settings.memory is not None:
+        found.append(("network_settings.memory", "remove it; POCA with an LSTM memory is not implemented yet "
+                                                 "(PPO trains with memory)"))
     for name in ts.reward_signals:
         if name not in SUPPORTED_REWARD_SIGNALS:
             found.append((f"reward_signals.{name}",
                           f"remove it; supported reward signals: {', '.join(SUPPORTED_REWARD_SIGNALS)}"))
     if ts.behavioral_cloning is not None:
         found.append(("behavioral_cloning", "remove the block (no imitation learning yet)"))
-    if ts.self_play is not None:
-        found.append(("self_play", "remove the block; without it every team of a behavior trains one "
-                                   "shared policy, as in ML-Agents without self-play"))
     return found
 
 

@@ -29,13 +29,16 @@ class TaskStep:
     """The outcome of one control step for all n agents.
 
     rewards: float32 [n] reward earned in this step; done: bool [n] episode ended;
-    interrupted: bool [n] ended by max_step (only meaningful where done); stats: custom stats.
+    interrupted: bool [n] ended by max_step (only meaningful where done); stats: custom stats;
+    group_rewards: float32 [n] each agent's group's reward in this step (Unity's
+    SimpleMultiAgentGroup.AddGroupReward), or None for tasks without groups.
     """
 
     rewards: np.ndarray
     done: np.ndarray
     interrupted: np.ndarray
     stats: list[Stat] = field(default_factory=list)
+    group_rewards: np.ndarray | None = None
 
 
 class EnvironmentParameters:
@@ -104,6 +107,11 @@ class Task:
 
     def group_ids(self) -> np.ndarray | None:
         return None
+
+    def behaviors(self) -> list[tuple[str, slice | np.ndarray]]:
+        """(behavior key as sent, the rows of its agents): one behavior with every agent, unless
+        the task has several sharing one physics (e.g. ``soccer``: one behavior per team)."""
+        return [(f"{self.behavior_name}?team={self.team_id}", slice(None))]
 
     # Helpers -------------------------------------------------------------------------------
     def all_agents(self, mask: np.ndarray | None) -> np.ndarray:
