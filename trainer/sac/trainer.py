@@ -6,7 +6,10 @@ One trainer per brain, with the PPOTrainer's interface for the run loop (``proce
 * the policy: networks.Actor, squashed (tanh; state-dependent sigma);
 * a value network V(s) and its target copy (soft-updated with ``tau`` after every step);
 * twin Q networks Q1, Q2 (s, continuous actions) -> a value per discrete option (or one);
-* log entropy coefficients: one for the continuous block, one per discrete branch.
+* log entropy coefficients: one for the continuous block, one per discrete branch;
+* curiosity / rnd learners (trainer/ppo/reward_providers.py, shared with PPO), which reward
+  each sampled minibatch afresh and learn on minibatches of their own, one per
+  ``reward_signal_steps_per_update`` agent steps (as the reference does).
 
 Each gradient step samples ``batch_size`` experiences and steps three Adams (adam.py): the policy
 on its loss, V + Q1 + Q2 on theirs, the log alphas on theirs. Gradient steps keep pace with
@@ -23,12 +26,13 @@ import torch
 from torch import nn
 
 from protos.types import BehaviorSpec
-from trainer.config.support import SAC_REWARD_SIGNALS
+from trainer.config.support import SUPPORTED_REWARD_SIGNALS
 from trainer.errors import ConfigError
 from trainer.ppo import numpy_net
 from trainer.ppo.adam import Adam
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.networks import Critic, NetworkBody
+from trainer.ppo.reward_providers import Experience, make_providers
 from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
 from trainer.sac import losses
 from trainer.sac.hyperparams import SACHyperparams
@@ -77,9 +81,9 @@ class SACTrainer:
     def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: SACHyperparams,
                  seed: int, device: str = "cpu"):
         for name in hyperparams.reward_signals:
-            if name not in SAC_REWARD_SIGNALS:
-                raise ConfigError(f"reward_signals.{name} is not supported with SAC yet for behavior "
-                                  f"{brain_name!r}; use only {list(SAC_REWARD_SIGNALS)}")
+            if name not in SUPPORTED_REWARD_SIGNALS:
+                raise ConfigError(f"reward_signals.{name} is not supported yet for behavior "
+                                  f"{brain_name!r}; use only {list(SUPPORTED_REWARD_SIGNALS)}")
         if not hyperparams.reward_signals:
             raise ConfigError(f"behavior {brain_name!r} has no reward_signals; add an extrinsic block")
         if hyperparams.memory_size:
@@ -118,8 +122,12 @@ class SACTrainer:
         self.sample_generator.manual_seed(seed + 3)
         self.noise_generator = torch.Generator(device=self.device)  # the update's policy samples
         self.noise_generator.manual_seed(seed + 4)
+        # curiosity / rnd: their own networks and optimizers, seeded after the SAC networks
+        self.providers = make_providers(behavior_spec, hyperparams, seed + 5)
+        self._episode_intrinsic: dict[Any, dict[str, float]] = {}  # episode -> reward sums so far
         self.step = 0
         self.update_steps = 1  # gradient steps taken + 1 (the reference's counter, kept on resume)
+        self.reward_signal_update_steps = 1  # reward-signal learner steps + 1 (likewise)
         self._numpy_critic = numpy_net.NumpyCritic(self.critic) if (
             numpy_net.supports(self.critic) and self.device.type == "cpu") else None
 
@@ -146,6 +154,7 @@ class SACTrainer:
         done = np.zeros(length, dtype=np.float32)  # an interrupted episode bootstraps from its last obs
         done[-1] = float(traj.done and not traj.interrupted)
         fields["done"] = done
+        stats = self._intrinsic_rewards(traj, fields)
         self.buffer.add(fields)
         self.step += length
         copy_normalization(self.policy.actor.network_body, self.critic.network_body)
@@ -154,19 +163,57 @@ class SACTrainer:
         else:
             with torch.inference_mode():
                 values = {k: v.cpu().numpy() for k, v in self.critic(self._tensors(obs)).items()}
-        return {f"Policy/{name.capitalize()} Value": float(np.mean(v)) for name, v in values.items()}
+        stats.update({f"Policy/{self._stat_name(name)} Value": float(np.mean(v)) for name, v in values.items()})
+        return stats
+
+    def _stat_name(self, signal: str) -> str:
+        provider = self.providers.get(signal)
+        return provider.stat_name if provider is not None else signal.capitalize()
+
+    def _experience(self, columns: dict[str, np.ndarray]) -> Experience:
+        """What a reward provider reads, from replay-buffer columns (a trajectory's or a minibatch)."""
+        n_obs = len(self.behavior_spec.observation_specs)
+        return Experience([columns[_obs_key(i)] for i in range(n_obs)],
+                          [columns[_next_obs_key(i)] for i in range(n_obs)],
+                          columns["continuous_actions"], columns["discrete_actions"], columns.get("masks"))
+
+    def _intrinsic_rewards(self, traj: Trajectory, fields: dict[str, np.ndarray]) -> dict[str, float]:
+        """Each provider's reward x strength summed over the episode, reported as
+        ``Policy/<Name> Reward`` when it ends (the reference's per-episode statistic; the
+        rewards SAC learns from are computed again on every sampled minibatch)."""
+        if not self.providers:
+            return {}
+        stats: dict[str, float] = {}
+        experience = self._experience(fields)
+        sums = self._episode_intrinsic.setdefault(traj.episode, {})
+        for name, provider in self.providers.items():
+            rewards = provider.evaluate(experience) * np.float32(provider.strength)
+            sums[name] = sums.get(name, 0.0) + float(np.sum(rewards))
+            if traj.done:
+                stats[f"Policy/{provider.stat_name} Reward"] = sums[name]
+        if traj.done:
+            self._episode_intrinsic.pop(traj.episode, None)
+        return stats
 
     def forget_episodes(self) -> None:
-        """Nothing is kept per unfinished episode (the run loop calls this after a reset)."""
+        """After a RESET or a simulator restart the unfinished episodes never continue: drop their
+        intrinsic reward sums."""
+        self._episode_intrinsic.clear()
 
     # ------------------------------------------------------------------ update
     def _updates_due(self) -> bool:
         h = self.hyperparams
         return (self.step - h.buffer_init_steps) / self.update_steps > h.steps_per_update
 
+    def _reward_signal_updates_due(self) -> bool:
+        h = self.hyperparams
+        return bool(self.providers) and (
+            (self.step - h.buffer_init_steps) / self.reward_signal_update_steps > h.reward_signal_steps_per_update)
+
     def ready_to_update(self) -> bool:
         h = self.hyperparams
-        return len(self.buffer) >= h.batch_size and self.step >= h.buffer_init_steps and self._updates_due()
+        return (len(self.buffer) >= h.batch_size and self.step >= h.buffer_init_steps
+                and (self._updates_due() or self._reward_signal_updates_due()))
 
     def learning_rate(self) -> float:
         h = self.hyperparams
@@ -189,6 +236,14 @@ class SACTrainer:
             for key, value in self.gradient_step(batch).items():
                 collected.setdefault(key, []).append(value)
             self.update_steps += 1
+        # then the reward-signal learners catch up, on minibatches of their own (the reference
+        # updates them after the policy, at their own pace: reward_signal_steps_per_update)
+        while self._reward_signal_updates_due():
+            experience = self._experience(self.buffer.sample(self.hyperparams.batch_size, self.sample_generator))
+            for provider in self.providers.values():
+                for key, value in provider.update(experience).items():
+                    collected.setdefault(key, []).append(value)
+            self.reward_signal_update_steps += 1
         result = {key: float(np.mean(values)) for key, values in collected.items()}
         result["Policy/Learning Rate"] = learning_rate
         return result
@@ -221,10 +276,17 @@ class SACTrainer:
         alpha_c = self.log_ent_coef.continuous.exp().detach() if spec.continuous_size else None
         alpha_d = self.log_ent_coef.discrete.exp().detach() if self.branches else None
         names = list(self.hyperparams.reward_signals)
+        experience = self._experience(batch) if self.providers else None
         q1_losses, q2_losses, value_losses = [], [], []
         for name in names:
             gamma, strength = self.hyperparams.reward_signals[name]
-            backup = losses.q_backup(t["rewards"] * strength, t["done"], next_values[name], gamma)
+            provider = self.providers.get(name)
+            if provider is None:
+                backup = losses.q_backup(t["rewards"] * strength, t["done"], next_values[name], gamma)
+            else:  # the provider's current reward of these experiences
+                rewards = torch.as_tensor(provider.evaluate(experience) * np.float32(strength), device=self.device)
+                backup = losses.q_backup(rewards, t["done"], next_values[name], gamma,
+                                         use_dones=not provider.ignore_done)
             taken1, taken2 = q1_taken[name], q2_taken[name]
             if self.branches:
                 discrete = t["discrete_actions"]
@@ -281,12 +343,14 @@ class SACTrainer:
             "Optimizer:value_optimizer": self.value_optimizer.state_dict(),
             "Optimizer:entropy_optimizer": self.entropy_optimizer.state_dict(),
             "Optimizer:entropy_coefficients": self.log_ent_coef.state_dict(),
-            "SAC": {"update_steps": torch.tensor(self.update_steps, dtype=torch.int64)},
+            "SAC": {"update_steps": torch.tensor(self.update_steps, dtype=torch.int64),
+                    "reward_signal_update_steps": torch.tensor(self.reward_signal_update_steps, dtype=torch.int64)},
             "RNG": {
                 "policy_sampling": self.policy.generator.get_state(),
                 "replay_sampling": self.sample_generator.get_state(),
                 "update_noise": self.noise_generator.get_state(),
             },
+            **{key: value for provider in self.providers.values() for key, value in provider.state_dict().items()},
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -305,6 +369,16 @@ class SACTrainer:
         sac = state.get("SAC")
         self.update_steps = (int(sac["update_steps"]) if sac is not None
                              else int(max(1, self.step / self.hyperparams.steps_per_update)))
+        self.reward_signal_update_steps = (
+            int(sac["reward_signal_update_steps"]) if sac is not None and "reward_signal_update_steps" in sac
+            else int(max(1, self.step / self.hyperparams.reward_signal_steps_per_update)))
+        for name, provider in self.providers.items():
+            keys = provider.state_dict().keys()
+            if all(key in state for key in keys):
+                provider.load_state_dict(state)
+            else:
+                logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
+                               name, ", ".join(sorted(k for k in keys if k not in state)))
         rng = state.get("RNG")
         if rng is not None:
             self.policy.generator.set_state(rng["policy_sampling"])
@@ -315,6 +389,7 @@ class SACTrainer:
         """--initialize-from: the weights stay, the step and update counters start over."""
         self.step = 0
         self.update_steps = 1
+        self.reward_signal_update_steps = 1
 
     def save_replay_buffer(self, path: str) -> None:
         self.buffer.save(path)
