@@ -32,6 +32,7 @@ from trainer.ppo import numpy_net
 from trainer.ppo.adam import Adam
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.networks import Critic, NetworkBody
+from trainer.ppo.trainer import PPOTrainer
 from trainer.ppo.reward_providers import Experience, make_providers
 from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
 from trainer.sac import losses
@@ -86,8 +87,6 @@ class SACTrainer:
                                   f"{brain_name!r}; use only {list(SUPPORTED_REWARD_SIGNALS)}")
         if not hyperparams.reward_signals:
             raise ConfigError(f"behavior {brain_name!r} has no reward_signals; add an extrinsic block")
-        if hyperparams.memory_size:
-            raise ConfigError(f"behavior {brain_name!r}: SAC with network_settings.memory is not implemented yet")
         self.brain_name = brain_name
         self.behavior_spec = behavior_spec
         self.hyperparams = hyperparams
@@ -117,7 +116,12 @@ class SACTrainer:
                                      lr=lr)  # adam.py says why not torch.optim
         self.value_optimizer = Adam(chain(self.critic.parameters(), self.q_network.parameters()), lr=lr)
         self.entropy_optimizer = Adam(self.log_ent_coef.parameters(), lr=lr)
-        self.buffer = ReplayBuffer(hyperparams.buffer_size)
+        # LSTM: experiences are stored and sampled in whole sequences (replay_buffer.py); the
+        # critic's memory at the end of an episode's last trajectory is where its next one starts
+        self.sequence_length = hyperparams.sequence_length if hyperparams.memory_size else 1
+        self._critic_memory: dict[Any, np.ndarray] = {}  # episode -> float32 [memory_size]
+        step = self.sequence_length
+        self.buffer = ReplayBuffer(-(-hyperparams.buffer_size // step) * step)
         self.sample_generator = torch.Generator()
         self.sample_generator.manual_seed(seed + 3)
         self.noise_generator = torch.Generator(device=self.device)  # the update's policy samples
@@ -129,7 +133,11 @@ class SACTrainer:
         self.update_steps = 1  # gradient steps taken + 1 (the reference's counter, kept on resume)
         self.reward_signal_update_steps = 1  # reward-signal learner steps + 1 (likewise)
         self._numpy_critic = numpy_net.NumpyCritic(self.critic) if (
-            numpy_net.supports(self.critic) and self.device.type == "cpu") else None
+            numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
+
+    # the recurrent critic's value estimates run sequence by sequence as PPO's (one implementation)
+    _value_estimates_by_sequence = PPOTrainer._value_estimates_by_sequence
+    _critic_with_memory = PPOTrainer._critic_with_memory
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays) -> list[torch.Tensor]:
@@ -155,14 +163,22 @@ class SACTrainer:
         done[-1] = float(traj.done and not traj.interrupted)
         fields["done"] = done
         stats = self._intrinsic_rewards(traj, fields)
-        self.buffer.add(fields)
-        self.step += length
         copy_normalization(self.policy.actor.network_body, self.critic.network_body)
-        if self._numpy_critic is not None:
+        if self.hyperparams.memory_size:
+            values, _, critic_memories = self._value_estimates_by_sequence(traj)
+            fields["memory"] = np.asarray(traj.memories, np.float32)
+            fields["critic_memory"] = critic_memories
+            fields["masks"] = np.ones(length, dtype=np.float32)
+            pad = -length % self.sequence_length  # whole sequences: zeros after the last step, masks 0
+            if pad:
+                fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
+        elif self._numpy_critic is not None:
             values = self._numpy_critic(obs)
         else:
             with torch.inference_mode():
                 values = {k: v.cpu().numpy() for k, v in self.critic(self._tensors(obs)).items()}
+        self.buffer.add(fields)
+        self.step += length
         stats.update({f"Policy/{self._stat_name(name)} Value": float(np.mean(v)) for name, v in values.items()})
         return stats
 
@@ -197,8 +213,9 @@ class SACTrainer:
 
     def forget_episodes(self) -> None:
         """After a RESET or a simulator restart the unfinished episodes never continue: drop their
-        intrinsic reward sums."""
+        intrinsic reward sums and critic memories."""
         self._episode_intrinsic.clear()
+        self._critic_memory.clear()
 
     # ------------------------------------------------------------------ update
     def _updates_due(self) -> bool:
@@ -232,14 +249,13 @@ class SACTrainer:
             copy_normalization(actor_body, network.network_body)
         collected: dict[str, list[float]] = {}
         while self._updates_due():
-            batch = self.buffer.sample(self.hyperparams.batch_size, self.sample_generator)
-            for key, value in self.gradient_step(batch).items():
+            for key, value in self.gradient_step(self._sample()).items():
                 collected.setdefault(key, []).append(value)
             self.update_steps += 1
         # then the reward-signal learners catch up, on minibatches of their own (the reference
         # updates them after the policy, at their own pace: reward_signal_steps_per_update)
         while self._reward_signal_updates_due():
-            experience = self._experience(self.buffer.sample(self.hyperparams.batch_size, self.sample_generator))
+            experience = self._experience(self._sample())
             for provider in self.providers.values():
                 for key, value in provider.update(experience).items():
                     collected.setdefault(key, []).append(value)
@@ -248,15 +264,46 @@ class SACTrainer:
         result["Policy/Learning Rate"] = learning_rate
         return result
 
+    def _sample(self) -> dict[str, np.ndarray]:
+        """A minibatch of ``batch_size`` rows: single experiences, or with memory whole sequences
+        (batch_size // sequence_length of them, at least one, as the reference)."""
+        size, step = self.hyperparams.batch_size, self.sequence_length
+        if step == 1:
+            return self.buffer.sample(size, self.sample_generator)
+        return self.buffer.sample_sequences(max(size // step, 1), step, self.sample_generator)
+
     def gradient_step(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
-        """One SAC step on a sampled minibatch (numpy columns of the replay buffer)."""
+        """One SAC step on a sampled minibatch (numpy columns of the replay buffer).
+
+        With memory the rows are sequences: the policy starts each from its stored memory, V
+        from the stored critic memory, Q1 and Q2 from zero (the reference's choice: they have
+        no memory at inference), and the target V from V's memory one step in; the losses
+        average over the unpadded rows only."""
         spec = self.behavior_spec.action_spec
         n_obs = len(self.behavior_spec.observation_specs)
         t = {key: torch.as_tensor(value, device=self.device) for key, value in batch.items()}
         obs = [t[_obs_key(i)] for i in range(n_obs)]
         next_obs = [t[_next_obs_key(i)] for i in range(n_obs)]
         allowed = (~t["action_masks"]).float() if self.branches else None
-        actions, cont_log_probs, probs, all_log_probs = self.policy.sample_with_grad(obs, allowed, self.noise_generator)
+        step = self.sequence_length
+        if self.hyperparams.memory_size:
+            memories = t["memory"][::step].unsqueeze(0)
+            value_memories = t["critic_memory"][::step].unsqueeze(0)
+            q_memories = torch.zeros_like(value_memories)
+
+            def run(network, inputs, actions=None, start=q_memories):
+                return network.forward_memory(inputs, start, step, actions)[0]
+
+            with torch.no_grad():
+                next_memories = self.critic.forward_memory([o[::step] for o in obs], value_memories, 1)[1]
+        else:
+            memories = value_memories = next_memories = None
+
+            def run(network, inputs, actions=None, start=None):
+                return network(inputs, actions)
+
+        actions, cont_log_probs, probs, all_log_probs = self.policy.sample_with_grad(
+            obs, allowed, self.noise_generator, memories, step)
         stored = t["continuous_actions"] if spec.continuous_size else None
         q1, q2 = self.q_network.q1_network, self.q_network.q2_network
         # Q1 of the policy's own actions with Q1's parameters held constant: the policy loss's
@@ -264,29 +311,41 @@ class SACTrainer:
         for p in self._q1_params:
             p.requires_grad_(False)
         try:
-            q1_policy = q1(obs, actions)
+            q1_policy = run(q1, obs, actions)
         finally:
             for p in self._q1_params:
                 p.requires_grad_(True)
         with torch.no_grad():
-            q2_policy = q2(obs, actions)
-            next_values = self.target_network(next_obs)
-        q1_taken, q2_taken = q1(obs, stored), q2(obs, stored)
-        values = self.critic(obs)
-        alpha_c = self.log_ent_coef.continuous.exp().detach() if spec.continuous_size else None
-        alpha_d = self.log_ent_coef.discrete.exp().detach() if self.branches else None
+            q2_policy = run(q2, obs, actions)
+            next_values = run(self.target_network, next_obs, start=next_memories)
+        q1_taken, q2_taken = run(q1, obs, stored), run(q2, obs, stored)
+        values = run(self.critic, obs, start=value_memories)
         names = list(self.hyperparams.reward_signals)
         experience = self._experience(batch) if self.providers else None
+        rewards = {}
+        for name in names:
+            provider = self.providers.get(name)
+            strength = self.hyperparams.reward_signals[name][1]
+            rewards[name] = (t["rewards"] * strength if provider is None else  # the provider's current reward
+                             torch.as_tensor(provider.evaluate(experience) * np.float32(strength), device=self.device))
+        if self.hyperparams.memory_size:  # from here on, the unpadded rows only
+            keep = t["masks"] > 0
+
+            def real(x):
+                return None if x is None else {k: v[keep] for k, v in x.items()} if isinstance(x, dict) else x[keep]
+
+            q1_policy, q2_policy, next_values, q1_taken, q2_taken, values, rewards = map(
+                real, (q1_policy, q2_policy, next_values, q1_taken, q2_taken, values, rewards))
+            cont_log_probs, probs, all_log_probs = map(real, (cont_log_probs, probs, all_log_probs))
+            t = {key: t[key][keep] for key in ("done", "discrete_actions")}
+        alpha_c = self.log_ent_coef.continuous.exp().detach() if spec.continuous_size else None
+        alpha_d = self.log_ent_coef.discrete.exp().detach() if self.branches else None
         q1_losses, q2_losses, value_losses = [], [], []
         for name in names:
-            gamma, strength = self.hyperparams.reward_signals[name]
+            gamma = self.hyperparams.reward_signals[name][0]
             provider = self.providers.get(name)
-            if provider is None:
-                backup = losses.q_backup(t["rewards"] * strength, t["done"], next_values[name], gamma)
-            else:  # the provider's current reward of these experiences
-                rewards = torch.as_tensor(provider.evaluate(experience) * np.float32(strength), device=self.device)
-                backup = losses.q_backup(rewards, t["done"], next_values[name], gamma,
-                                         use_dones=not provider.ignore_done)
+            backup = losses.q_backup(rewards[name], t["done"], next_values[name], gamma,
+                                     use_dones=provider is None or not provider.ignore_done)
             taken1, taken2 = q1_taken[name], q2_taken[name]
             if self.branches:
                 discrete = t["discrete_actions"]
