@@ -32,9 +32,9 @@ from trainer.ppo import numpy_net
 from trainer.ppo.adam import Adam
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.networks import Critic, NetworkBody
-from trainer.ppo.trainer import PPOTrainer
 from trainer.ppo.reward_providers import Experience, make_providers
 from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
+from trainer.ppo.trainer import PPOTrainer
 from trainer.sac import losses
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.policy import SACPolicy
