@@ -34,6 +34,8 @@ CONFIGS = {
     "ppo": "hyperparameters: {{batch_size: 32, buffer_size: {frozen}, num_epoch: 3}}",
     "sac": ("hyperparameters: {{batch_size: 32, buffer_size: 5000, buffer_init_steps: {frozen_sac}, "
             "steps_per_update: 10.0, init_entcoef: 0.01, save_replay_buffer: true}}"),
+    # basic sends no group ids: every agent is a group of one (the critic attends over itself)
+    "poca": "hyperparameters: {{batch_size: 32, buffer_size: {frozen}, num_epoch: 3}}",
 }
 
 TEMPLATE = """

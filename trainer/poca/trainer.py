@@ -62,6 +62,13 @@ def lonely_group(traj: Trajectory, spec: BehaviorSpec) -> GroupColumns:
                         [np.zeros((0, *s), np.float32) for s in shapes], np.zeros(0, bool), True)
 
 
+def with_agent(mates_present: torch.Tensor) -> torch.Tensor:
+    """[n, M] teammates present -> [n, 1 + M] with the agent itself (always present) first; also
+    for M = 0 (no group: ``present[:, :1]`` would then be empty)."""
+    own = torch.ones((mates_present.shape[0], 1), dtype=torch.bool, device=mates_present.device)
+    return torch.cat([own, mates_present], dim=1)
+
+
 class POCATrainer(PPOTrainer):
     uses_groups = True  # the run loop assembles this behavior's trajectories with rollout.GroupTracker
 
@@ -87,7 +94,7 @@ class POCATrainer(PPOTrainer):
         mates = [t(o) for o in group.obs]
         present = t(group.present)
         everyone = [torch.cat([o.unsqueeze(1), m], dim=1) for o, m in zip(own, mates)]
-        with_self = torch.cat([torch.ones_like(present[:, :1]), present], dim=1)
+        with_self = with_agent(present)
         after = [torch.cat([t(np.asarray(n, np.float32))[None], t(m)], dim=0)[None]
                  for n, m in zip(traj.next_obs, group.next_obs)]
         after_present = t(np.concatenate([[True], group.next_present]))[None]
@@ -158,7 +165,7 @@ class POCATrainer(PPOTrainer):
         allowed = batch["allowed"] if self.behavior_spec.action_spec.discrete_branches else None
         log_probs, entropy = self.policy.evaluate(obs, allowed, batch["continuous_actions"], batch["discrete_actions"])
         everyone = [torch.cat([o.unsqueeze(1), m], dim=1) for o, m in zip(obs, mates)]
-        values = self.critic.value(everyone, torch.cat([torch.ones_like(present[:, :1]), present], dim=1))
+        values = self.critic.value(everyone, with_agent(present))
         baselines = self.critic.baseline(obs, mates, batch["mates_continuous"], batch["mates_discrete"], present)
         names = list(values)
         returns = {n: batch[f"returns:{n}"] for n in names}
