@@ -86,9 +86,34 @@ def make_trainer(brain: str, spec: BehaviorSpec, settings, seed: int, device: st
     if settings.trainer_type == "sac":
         from trainer.sac.trainer import SACTrainer
 
-        return SACTrainer(brain, spec, sac_hyperparams_from_settings(settings), seed=seed, device=device)
-    return PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
-                      use_numpy_update=use_numpy_update)
+        trainer = SACTrainer(brain, spec, sac_hyperparams_from_settings(settings), seed=seed, device=device)
+    else:
+        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
+                             use_numpy_update=use_numpy_update)
+    attach_demonstrations(trainer, brain, spec, settings, seed)
+    return trainer
+
+
+def attach_demonstrations(trainer, brain: str, spec: BehaviorSpec, settings, seed: int) -> None:
+    """behavioral_cloning's learner and GAIL's expert data, from their demo_path (read once per
+    path); ConfigError (exit 2) if a demonstration does not fit the behavior."""
+    from trainer.demonstrations import demo_paths, load_demonstrations
+
+    loaded = {}
+    for key, path in demo_paths(settings):
+        if path not in loaded:
+            loaded[path] = load_demonstrations(path, spec, f"behaviors.{brain}.{key}")
+    bc = settings.behavioral_cloning
+    if bc is not None:
+        from trainer.behavioral_cloning import BehavioralCloning
+
+        h = settings.hyperparameters
+        trainer.behavioral_cloning = BehavioralCloning(trainer.policy, bc, loaded[bc.demo_path], h.learning_rate,
+                                                       h.batch_size, seed + 7)
+    gail = settings.reward_signals.get("gail")
+    provider = getattr(trainer, "providers", {}).get("gail")
+    if gail is not None and provider is not None:
+        provider.set_demonstrations(loaded[gail.demo_path])
 
 
 @dataclass

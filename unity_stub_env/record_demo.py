@@ -17,6 +17,7 @@ ONNX contract, run through onnxruntime with its deterministic outputs (the mean 
 """
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Callable
@@ -120,6 +121,9 @@ def record(task_name: str, out_path: str, policy: str, steps: int = DEFAULT_STEP
         raise RecordError(f"--record-demo {out_path!r}: the file name must end in .demo (trainers read "
                           "only those)")
     task = make_task(task_name, num_areas=num_areas, seed=seed)
+    folder = os.path.dirname(out_path)
+    if folder:
+        os.makedirs(folder, exist_ok=True)
     if policy == "scripted":
         if task_name not in SCRIPTED:
             raise RecordError(f"no scripted expert for task {task_name!r} (there is one for "

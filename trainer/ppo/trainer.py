@@ -92,6 +92,9 @@ class PPOTrainer:
             numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
         self._numpy_ppo: numpy_update.NumpyPPO | None = None  # built at the first numpy update
         self._rows: int | None = None  # ``update``'s rows
+        # behavioral_cloning (trainer/behavioral_cloning.py), set by behavior.make_trainer: one round
+        # of cloning after each PPO update
+        self.behavioral_cloning = None
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays: list[np.ndarray]) -> list[torch.Tensor]:
@@ -285,7 +288,10 @@ class PPOTrainer:
             self._update_numpy(learning_rate, beta, epsilon, collected)
         else:
             self._update_torch(beta, epsilon, collected)
-        return self._finish_update(collected, learning_rate, beta, epsilon)
+        result = self._finish_update(collected, learning_rate, beta, epsilon)
+        if self.behavioral_cloning is not None:
+            result.update(self.behavioral_cloning.update(self.step))
+        return result
 
     def _update_torch(self, beta: float, epsilon: float, collected: dict[str, list[float]]) -> None:
         """Autograd through the torch modules (recurrent, visual or shared-body networks, or
@@ -370,8 +376,10 @@ class PPOTrainer:
 
     # ------------------------------------------------------------------ persistence
     def optimizers(self) -> list[Adam]:
-        """Every optimiser of this brain: PPO's, then each curiosity / rnd learner's."""
-        return [self.optimizer, *(p.optimizer for p in self.providers.values() if hasattr(p, "optimizer"))]
+        """Every optimiser of this brain: PPO's, each curiosity / rnd / gail learner's, then
+        behavioral cloning's."""
+        bc = [] if self.behavioral_cloning is None else [self.behavioral_cloning.optimizer]
+        return [self.optimizer, *(p.optimizer for p in self.providers.values() if hasattr(p, "optimizer")), *bc]
 
     def normalizers(self) -> list:
         """Every observation normaliser of the actor, the critic and the curiosity / rnd networks
@@ -406,6 +414,8 @@ class PPOTrainer:
         }
         for provider in self.providers.values():
             state.update(provider.state_dict())
+        if self.behavioral_cloning is not None:
+            state.update(self.behavioral_cloning.state_dict())
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -429,6 +439,11 @@ class PPOTrainer:
             else:
                 logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
                                name, ", ".join(sorted(k for k in keys if k not in state)))
+        if self.behavioral_cloning is not None:
+            if "Optimizer:BC" in state:
+                self.behavioral_cloning.load_state_dict(state)
+            else:
+                logger.warning("The checkpoint has no behavioral cloning state: its optimizer starts fresh.")
         rng = state.get("RNG")
         if rng is not None:
             self.policy.generator.set_state(rng["policy_sampling"])
