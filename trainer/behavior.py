@@ -57,7 +57,8 @@ def hyperparams_from_settings(settings) -> PPOHyperparams:
             name: SignalNetwork(learning_rate=rs.learning_rate, hidden_units=rs.network_settings.hidden_units,
                                 num_layers=rs.network_settings.num_layers,
                                 normalize=rs.network_settings.normalize,
-                                vis_encode_type=rs.network_settings.vis_encode_type)
+                                vis_encode_type=rs.network_settings.vis_encode_type,
+                                use_actions=getattr(rs, "use_actions", False), use_vail=getattr(rs, "use_vail", False))
             for name, rs in settings.reward_signals.items() if name != "extrinsic"
         },
     )

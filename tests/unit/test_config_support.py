@@ -47,7 +47,7 @@ def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
             trainer_type: ppo
     """)
     assert [key for key, _ in unsupported(opts.behaviors["Striker"])] == [
-        "reward_signals.gail", "behavioral_cloning", "self_play"]
+        "behavioral_cloning", "reward_signals.gail", "self_play"]  # demonstrations: refused with memory only
     assert unsupported(opts.behaviors["Goalie"]) == []
     with pytest.raises(ConfigError) as info:
         check_supported(opts)
@@ -76,10 +76,11 @@ def test_default_settings_are_checked_too(tmp_path):
     opts = options(tmp_path, """
         default_settings:
           trainer_type: ppo
-          reward_signals: {gail: {demo_path: a.demo}}
+          network_settings: {memory: {memory_size: 8, sequence_length: 4}}
+          behavioral_cloning: {demo_path: a.demo}
         behaviors: {}
     """)
-    with pytest.raises(ConfigError, match=r"'default_settings\.reward_signals\.gail'"):
+    with pytest.raises(ConfigError, match=r"'default_settings\.behavioral_cloning'"):
         check_supported(opts)
 
 

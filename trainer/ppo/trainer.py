@@ -75,6 +75,7 @@ class PPOTrainer:
         # curiosity / rnd: their own networks and optimizers (reward_providers.py)
         self.providers = make_providers(behavior_spec, hyperparams, seed + 4)
         self._needs_next_obs = any(p.needs_next_obs for p in self.providers.values())
+        self._needs_done = any(getattr(p, "needs_done", False) for p in self.providers.values())  # gail
         self._episode_intrinsic: dict[Any, dict[str, float]] = {}  # episode -> reward sums so far
         # LSTM: experiences train in sequences of this length; the critic's memory at the end of an
         # episode's last trajectory is where its next trajectory starts
@@ -168,7 +169,12 @@ class PPOTrainer:
                 next_obs = [np.concatenate([o[1:], n[None]], axis=0).astype(np.float32)
                             for o, n in zip(traj.obs, traj.next_obs)]
                 fields.update({_next_obs_key(i): o for i, o in enumerate(next_obs)})
-            experience = Experience(traj.obs, next_obs, traj.continuous_actions, traj.discrete_actions)
+            done = None
+            if self._needs_done:  # 1 on the step that ended the episode
+                done = np.zeros(length, np.float32)
+                done[-1] = float(traj.done)
+                fields["done"] = done
+            experience = Experience(traj.obs, next_obs, traj.continuous_actions, traj.discrete_actions, done=done)
         advantages = []
         stats: dict[str, float] = {}
         for name, (gamma, strength) in self.hyperparams.reward_signals.items():
@@ -316,7 +322,7 @@ class PPOTrainer:
         experience = Experience(
             [batch[_obs_key(i)] for i in range(n_obs)],
             [batch[_next_obs_key(i)] for i in range(n_obs)] if self._needs_next_obs else None,
-            batch["continuous_actions"], batch["discrete_actions"], batch.get("masks"))
+            batch["continuous_actions"], batch["discrete_actions"], batch.get("masks"), batch.get("done"))
         stats: dict[str, float] = {}
         for provider in self.providers.values():
             stats.update(provider.update(experience))
@@ -351,7 +357,8 @@ class PPOTrainer:
         provider_columns = {}  # what only curiosity / rnd read: not indexed per minibatch without them
         if self.providers:
             provider_columns = {_obs_key(i): o for i, o in enumerate(obs)}
-            provider_columns.update({k: data.pop(k) for k in [_next_obs_key(i) for i in range(n_obs)] if k in data})
+            provider_columns.update({k: data.pop(k) for k in [*(_next_obs_key(i) for i in range(n_obs)), "done"]
+                                     if k in data})
         if self._numpy_ppo is None:
             self._numpy_ppo = numpy_update.NumpyPPO(self.policy.numpy_actor, self._numpy_critic, self.optimizer)
         stepper = self._numpy_ppo
