@@ -289,3 +289,26 @@ def test_resume_keeps_the_gail_discriminator_and_bc_state(tmp_path):
     for key, value in first.providers["gail"].network.state_dict().items():
         assert torch.equal(resumed.providers["gail"].network.state_dict()[key], value), key
     assert train(resumed) == train(first)
+
+
+def test_sac_runs_behavioral_cloning_after_every_gradient_step_and_keeps_it_in_checkpoints():
+    from trainer.ppo.buffer import Trajectory
+    from trainer.sac.hyperparams import SACHyperparams
+    from trainer.sac.trainer import SACTrainer
+
+    spec = BehaviorSpec((VECTOR,), ActionSpec(1, (3,)))
+    demo = _demo(16)
+    trainer = SACTrainer("B", spec, SACHyperparams(batch_size=8, buffer_size=100, hidden_units=8,
+                                                   steps_per_update=4.0), seed=0)
+    trainer.behavioral_cloning = BehavioralCloning(trainer.policy, BehavioralCloningSettings(demo_path="x", num_epoch=1),
+                                                   demo, 3e-4, 8, seed=0)
+    out = trainer.policy.act(demo.obs)
+    trainer.process_trajectory(Trajectory(obs=demo.obs, next_obs=[demo.obs[0][0]], rewards=np.ones(16, np.float32),
+                                          continuous_actions=out.continuous_raw, discrete_actions=out.discrete,
+                                          log_probs=out.log_probs, action_masks=None, done=True, interrupted=False))
+    stats = trainer.update()
+    gradient_steps = trainer.update_steps - 1
+    assert gradient_steps == 3  # (16 - 0) / update_steps > 4 until update_steps = 4
+    assert trainer.behavioral_cloning.optimizer.step_count == gradient_steps * (16 // 8)
+    assert stats["Losses/Pretraining Loss"] > 0.0
+    assert "Optimizer:BC" in trainer.state_dict()

@@ -122,6 +122,7 @@ class SACTrainer:
         self.update_steps = 1  # gradient steps taken + 1 (the reference's counter, kept on resume)
         self._numpy_critic = numpy_net.NumpyCritic(self.critic) if (
             numpy_net.supports(self.critic) and self.device.type == "cpu") else None
+        self.behavioral_cloning = None  # trainer/behavioral_cloning.py, set by behavior.make_trainer
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays) -> list[torch.Tensor]:
@@ -186,7 +187,10 @@ class SACTrainer:
         collected: dict[str, list[float]] = {}
         while self._updates_due():
             batch = self.buffer.sample(self.hyperparams.batch_size, self.sample_generator)
-            for key, value in self.gradient_step(batch).items():
+            stats = self.gradient_step(batch)
+            if self.behavioral_cloning is not None:  # after every gradient step, as the reference does
+                stats.update(self.behavioral_cloning.update(self.step))
+            for key, value in stats.items():
                 collected.setdefault(key, []).append(value)
             self.update_steps += 1
         result = {key: float(np.mean(values)) for key, values in collected.items()}
@@ -271,7 +275,9 @@ class SACTrainer:
     def state_dict(self) -> dict[str, Any]:
         """checkpoint.pt content: the reference's keys, plus the entropy coefficients (which the
         reference does not save), the update counter and the generators (``RNG``)."""
+        bc = {} if self.behavioral_cloning is None else self.behavioral_cloning.state_dict()
         return {
+            **bc,
             "Policy": self.policy.actor.state_dict(),
             "global_step": {"step": torch.tensor(self.step, dtype=torch.int64)},
             "Optimizer:q_network": self.q_network.state_dict(),
@@ -305,6 +311,8 @@ class SACTrainer:
         sac = state.get("SAC")
         self.update_steps = (int(sac["update_steps"]) if sac is not None
                              else int(max(1, self.step / self.hyperparams.steps_per_update)))
+        if self.behavioral_cloning is not None and "Optimizer:BC" in state:
+            self.behavioral_cloning.load_state_dict(state)
         rng = state.get("RNG")
         if rng is not None:
             self.policy.generator.set_state(rng["policy_sampling"])
