@@ -1,4 +1,4 @@
-"""``.demo`` files: Unity's Demonstration Recorder format, read and written (docs/protocol.md §9).
+"""``.demo`` files: Unity's Demonstration Recorder format, read and written (docs/demonstrations.md).
 
 A ``.demo`` file is length-delimited protobuf messages of the wire's own types:
 

@@ -2,7 +2,7 @@
 
 One ``BehavioralCloning`` per brain, called by its trainer after each of the trainer's own
 updates (PPO: ``PPOTrainer.update``; SAC: ``SACTrainer.update``). Behaviour as in ML-Agents
-Release 22 (docs/configuration.md, ``behavioral_cloning``):
+Release 22 (docs/demonstrations.md):
 
 * its own Adam over the actor's parameters, learning rate = the policy's learning rate x
   ``strength``; with ``steps`` > 0 that rate decays linearly to 1e-10 over ``steps`` trainer

@@ -3,7 +3,7 @@ behavioral cloning (trainer/behavioral_cloning.py) and GAIL (trainer/ppo/reward_
 
 The file format is ``protos.demo_file``'s; the agent infos go through the trainer's one codec
 (``codec.agent_fields``), exactly as they would arrive on the wire. Pairing, as the reference
-loader does (docs/protocol.md §9): experience t holds the observations and the action of record
+loader does (docs/demonstrations.md): experience t holds the observations and the action of record
 t and the reward and done flag of record t+1; the last record only gives those "next" values.
 
 Actions are kept as the environment received them (continuous in [-1, 1]); a record without

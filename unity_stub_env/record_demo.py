@@ -2,7 +2,7 @@
 
 Plays the task without a trainer, the way Unity's Demonstration Recorder records an agent
 driven by its heuristic or by a trained model, and writes Unity's ``.demo`` format
-(``protos.demo_file``; docs/protocol.md §9). The agent infos are the ones the task would send
+(``protos.demo_file``; docs/demonstrations.md). The agent infos are the ones the task would send
 a trainer (``Academy.collect_infos``), so a trainer reads them exactly as it reads the wire.
 
 Each file holds one agent stream: every agent's episodes are buffered and written whole, one

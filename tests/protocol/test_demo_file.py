@@ -1,5 +1,5 @@
 """protos.demo_file against hand-built messages: the byte layout of Unity's .demo format
-(docs/protocol.md §9), reading a file and a folder, and one clear error per kind of bad path."""
+(docs/demonstrations.md), reading a file and a folder, and one clear error per kind of bad path."""
 from __future__ import annotations
 
 import os

@@ -269,7 +269,7 @@ class DiscriminatorNetwork(nn.Module):
 class GAILProvider:
     """Generative adversarial imitation: a discriminator learns to tell the policy's steps from a
     demonstration's, and the policy is rewarded for steps it takes for the demonstration's.
-    Behaviour as in ML-Agents Release 22 (docs/configuration.md, ``reward_signals.gail``):
+    Behaviour as in ML-Agents Release 22 (docs/demonstrations.md):
 
     * reward (before ``strength``) = -log(1 - D (1 - 1e-7)), D without VAIL noise; returns end at
       a terminal step (``done`` is not ignored);
