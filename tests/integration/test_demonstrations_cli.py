@@ -42,3 +42,49 @@ def test_a_demonstration_of_another_behavior_is_refused_when_the_behavior_connec
             "observations [(20,)], 0 continuous actions, discrete branches [3], but the behavior has "
             "observations [(8,)], 2 continuous actions") in r.stderr
     assert "Traceback" not in r.stderr + r.stdout
+
+
+def test_gail_and_cloning_train_report_and_resume_with_their_state(tmp_path, env_no_proxy):
+    from trainer.artifacts.checkpoints import load_checkpoint
+    from tests.integration.test_learn_features import tb_scalars
+
+    recorded = subprocess.run([sys.executable, "-m", "unity_stub_env.cli", "--task", "basic", "--record-demo",
+                               "demos/basic.demo", "--policy", "scripted", "--demo-steps", "40"],
+                              cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env_no_proxy)
+    assert recorded.returncode == 0, recorded.stderr
+    text = """behaviors:
+  Basic:
+    trainer_type: ppo
+    hyperparameters: {batch_size: 32, buffer_size: 256}
+    network_settings: {hidden_units: 20, num_layers: 1}
+    reward_signals:
+      extrinsic: {gamma: 0.9}
+      gail: {strength: 0.1, demo_path: demos, use_vail: true, use_actions: true, network_settings: {hidden_units: 16}}
+    behavioral_cloning: {demo_path: demos/basic.demo, steps: 2000}
+    time_horizon: 3
+    summary_freq: 300
+    checkpoint_interval: 100000
+    max_steps: MAX
+"""
+    (tmp_path / "c.yaml").write_text(text.replace("MAX", "600"))
+    (tmp_path / "c2.yaml").write_text(text.replace("MAX", "1200"))
+    common = ["--env", "stub:basic", "--run-id", "g", "--seed", "2", "--results-dir", str(tmp_path / "results"),
+              "--base-port", str(free_port_block())]
+    r = learn(["c.yaml", *common], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    tags = tb_scalars(tmp_path / "results/g/Basic")
+    for tag in ("Policy/Gail Reward", "Policy/Gail Value Estimate", "Losses/GAIL Loss", "Losses/GAIL KL Loss",
+                "Policy/GAIL Beta", "Policy/GAIL Expert Estimate", "Policy/GAIL Policy Estimate",
+                "Policy/GAIL Grad Mag Loss", "Losses/Pretraining Loss"):
+        assert tag in tags, tag
+    first = load_checkpoint(tmp_path / "results/g/Basic/checkpoint.pt")
+    assert {"Module:GAIL", "Optimizer:GAIL", "Optimizer:BC"} <= set(first)
+    r2 = learn(["c2.yaml", *common, "--resume"], cwd=tmp_path, env=env_no_proxy)
+    assert r2.returncode == 0, r2.stderr[-3000:]
+    output = r2.stdout + r2.stderr
+    assert "starts untrained" not in output and "starts fresh" not in output  # both came back
+    second = load_checkpoint(tmp_path / "results/g/Basic/checkpoint.pt")
+    assert int(second["global_step"]["step"]) >= 1200
+    # the resumed discriminator kept learning from where it was: its Adam counted on
+    steps = lambda state: max(int(s["step"]) for s in state["Optimizer:GAIL"]["state"].values())  # noqa: E731
+    assert steps(second) > steps(first) > 0
