@@ -19,8 +19,13 @@ One deliberate difference: the reference compares the demonstration's actions (w
 received, in [-1, 1]) with the raw Gaussian sample, which the environment receives divided by 3
 (clamp(a, -3, 3) / 3); a policy cloned that way acts at a third of the expert's amplitude. Here
 the sample goes through the same clamp and division first (SAC: through its tanh), so the
-cloned actions are the expert's. Recurrent policies are refused at start for now
-(trainer/config/support.py).
+cloned actions are the expert's.
+
+A recurrent policy (network_settings.memory) clones whole sequences of ``sequence_length``
+experiences, each starting from a zero memory as in the reference: the demonstration is cut into
+episodes, each padded with zeros to whole sequences, and the padding is left out of the loss
+(the reference averages over it too). ``batch_size`` is then rounded down to whole sequences (at
+least one) and ``samples_per_update`` counts experiences, padding included.
 """
 from __future__ import annotations
 
@@ -45,24 +50,41 @@ class BehavioralCloning:
         self.initial_lr = policy_learning_rate * settings.strength
         self.current_lr = self.initial_lr
         self.anneal_steps = settings.steps
-        self.batch_size = max(1, min(settings.batch_size or default_batch_size, len(demo)))
+        self.memory_size = getattr(policy, "memory_size", 0)
+        self.sequence_length = policy.hyperparams.sequence_length if self.memory_size else 1
+        columns = [*demo.obs, demo.continuous, demo.discrete, np.ones(len(demo), np.float32)]
+        if self.memory_size:
+            columns = _whole_sequences(columns, demo.done, self.sequence_length)
+        *obs, continuous, discrete, valid = columns
+        rows = len(valid)
+        # whole sequences per minibatch (one experience each without memory), at least one
+        self.sequences_per_batch = max(min(settings.batch_size or default_batch_size, rows) // self.sequence_length, 1)
+        self.batch_size = self.sequences_per_batch * self.sequence_length
         self.num_epoch = settings.num_epoch or DEFAULT_NUM_EPOCH
         self.samples_per_update = settings.samples_per_update
         self.optimizer = Adam([p for p in policy.actor.parameters() if p.requires_grad], lr=self.initial_lr)
         self.generator = torch.Generator()
         self.generator.manual_seed(seed)
-        self._obs = [torch.as_tensor(o) for o in demo.obs]
-        self._continuous = torch.as_tensor(demo.continuous)
-        self._discrete = torch.as_tensor(demo.discrete)
+        self._obs = [torch.as_tensor(o) for o in obs]
+        self._continuous = torch.as_tensor(continuous)
+        self._discrete = torch.as_tensor(discrete)
+        self._valid = torch.as_tensor(valid)  # 0 on sequence padding
 
     def _learning_rate(self, step: int) -> float:
         schedule = "linear" if self.anneal_steps > 0 else "constant"
         return decay(schedule, self.initial_lr, LEARNING_RATE_FLOOR, step, self.anneal_steps)
 
     def loss(self, index: torch.Tensor) -> torch.Tensor:
-        """The cloning loss of the demonstration rows ``index`` (with grad)."""
+        """The cloning loss of the demonstration rows ``index`` (with grad; with memory, whole
+        sequences in order)."""
         actor = self.policy.actor
-        encoding = actor.network_body([o[index] for o in self._obs])
+        obs = [o[index] for o in self._obs]
+        valid = self._valid[index]
+        if self.memory_size:
+            start = torch.zeros((1, len(index) // self.sequence_length, self.memory_size))
+            encoding, _ = actor.network_body.forward_memory(obs, start, self.sequence_length)
+        else:
+            encoding = actor.network_body(obs)
         mu, logits = actor.heads_of(encoding, None)
         loss = torch.zeros(())
         if mu is not None:
@@ -72,24 +94,26 @@ class BehavioralCloning:
                 acted = torch.tanh(sample)
             else:
                 acted = torch.clamp(sample, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP
-            loss = loss + torch.mean((acted - self._continuous[index]) ** 2)
+            loss = loss + _masked_mean(torch.mean((acted - self._continuous[index]) ** 2, dim=1), valid)
         if logits:
             expert = self._discrete[index]
             per_branch = [torch.nn.functional.cross_entropy(branch, expert[:, b], reduction="none")
                           for b, branch in enumerate(logits)]
-            loss = loss + torch.mean(torch.stack(per_branch))
+            loss = loss + _masked_mean(torch.mean(torch.stack(per_branch, dim=1), dim=1), valid)
         return loss
 
     def update(self, step: int) -> dict[str, float]:
         """One round of cloning after a trainer update at trainer step ``step``."""
         if self.current_lr <= LEARNING_RATE_FLOOR:
             return {"Losses/Pretraining Loss": 0.0}
-        n = len(self.demo)
-        per_epoch = n if self.samples_per_update <= 0 else min(n, self.samples_per_update)
+        rows, length = len(self._valid), self.sequence_length
+        per_epoch = rows if self.samples_per_update <= 0 else min(rows, self.samples_per_update)
         batches = max(per_epoch // self.batch_size, 1)
+        within = torch.arange(length)
         losses = []
         for _ in range(self.num_epoch):
-            order = torch.randperm(n, generator=self.generator)
+            order = torch.randperm(rows // length, generator=self.generator)  # whole sequences
+            order = (order[:, None] * length + within).reshape(-1)
             for b in range(batches):
                 loss = self.loss(order[b * self.batch_size:(b + 1) * self.batch_size])
                 self.optimizer.zero_grad()
@@ -110,3 +134,25 @@ class BehavioralCloning:
         self.current_lr = float(saved.pop("current_lr"))
         self.generator.set_state(saved.pop("generator"))
         self.optimizer.load_state_dict(saved)
+
+
+def _masked_mean(values: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    return torch.sum(values * valid) / torch.clamp(torch.sum(valid), min=1.0)
+
+
+def _whole_sequences(columns: list[np.ndarray], done: np.ndarray, length: int) -> list[np.ndarray]:
+    """Each column cut into episodes (an experience with ``done`` ends one), each episode padded
+    with zeros to a multiple of ``length`` rows."""
+    ends = (np.flatnonzero(done) + 1).tolist()
+    if not ends or ends[-1] != len(done):
+        ends.append(len(done))
+    out: list[list[np.ndarray]] = [[] for _ in columns]
+    start = 0
+    for end in ends:
+        pad = -(end - start) % length
+        for parts, column in zip(out, columns):
+            parts.append(column[start:end])
+            if pad:
+                parts.append(np.zeros((pad, *column.shape[1:]), column.dtype))
+        start = end
+    return [np.concatenate(parts) for parts in out]

@@ -46,13 +46,12 @@ def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
           Goalie:
             trainer_type: ppo
     """)
-    assert [key for key, _ in unsupported(opts.behaviors["Striker"])] == [
-        "behavioral_cloning", "reward_signals.gail", "self_play"]  # demonstrations: refused with memory only
+    assert [key for key, _ in unsupported(opts.behaviors["Striker"])] == ["self_play"]  # gail, bc: trained
     assert unsupported(opts.behaviors["Goalie"]) == []
     with pytest.raises(ConfigError) as info:
         check_supported(opts)
     message = str(info.value)
-    assert message.count("'behaviors.Striker.") == 3 and "Goalie" not in message
+    assert message.count("'behaviors.Striker.") == 1 and "Goalie" not in message
     assert "'behaviors.Striker.self_play': remove the block" in message
 
 
@@ -76,11 +75,10 @@ def test_default_settings_are_checked_too(tmp_path):
     opts = options(tmp_path, """
         default_settings:
           trainer_type: ppo
-          network_settings: {memory: {memory_size: 8, sequence_length: 4}}
-          behavioral_cloning: {demo_path: a.demo}
+          self_play: {save_steps: 100}
         behaviors: {}
     """)
-    with pytest.raises(ConfigError, match=r"'default_settings\.behavioral_cloning'"):
+    with pytest.raises(ConfigError, match=r"'default_settings\.self_play'"):
         check_supported(opts)
 
 

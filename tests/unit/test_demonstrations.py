@@ -312,3 +312,49 @@ def test_sac_runs_behavioral_cloning_after_every_gradient_step_and_keeps_it_in_c
     assert trainer.behavioral_cloning.optimizer.step_count == gradient_steps * (16 // 8)
     assert stats["Losses/Pretraining Loss"] > 0.0
     assert "Optimizer:BC" in trainer.state_dict()
+
+
+def test_a_recurrent_policy_clones_whole_sequences_from_zero_memory_without_the_padding():
+    spec = BehaviorSpec((VECTOR,), ActionSpec(0, (3,)))
+    demo = _demo(10)
+    demo = DemoExperiences(demo.obs, np.zeros((10, 0), np.float32), demo.discrete, demo.rewards,
+                           np.array([0, 0, 1, 0, 0, 0, 0, 0, 0, 1], bool))  # episodes of 3 and 7
+    policy = Policy(spec, PPOHyperparams(hidden_units=8, num_layers=1, memory_size=8, sequence_length=4), seed=1)
+    bc = BehavioralCloning(policy, BehavioralCloningSettings(demo_path="x", batch_size=8, num_epoch=1), demo,
+                           1e-3, 8, seed=0)
+    # 3 -> 4 rows, 7 -> 8 rows: 12 rows, 3 sequences, 2 per minibatch
+    assert bc._valid.tolist() == [1, 1, 1, 0, 1, 1, 1, 1, 1, 1, 1, 0]
+    assert (bc.sequences_per_batch, bc.batch_size) == (2, 8)
+    np.testing.assert_array_equal(bc._obs[0][4:11].numpy(), demo.obs[0][3:10])
+    # the loss of sequence 1 (rows 4..7) is the cross-entropy of running it from a zero memory
+    index = torch.arange(4, 8)
+    with torch.no_grad():
+        _, logits, _ = policy.actor.heads_with_memory([bc._obs[0][index]], None, torch.zeros(1, 1, 8), 4)
+        expected = torch.nn.functional.cross_entropy(logits[0], bc._discrete[index, 0]).item()
+        assert bc.loss(index).item() == pytest.approx(expected, rel=1e-6)
+        # padding rows do not count: sequence 0 (rows 0..3) averages its 3 real rows only
+        index = torch.arange(0, 4)
+        _, logits, _ = policy.actor.heads_with_memory([bc._obs[0][index]], None, torch.zeros(1, 1, 8), 4)
+        per_row = torch.nn.functional.cross_entropy(logits[0], bc._discrete[index, 0], reduction="none")
+        assert bc.loss(index).item() == pytest.approx(per_row[:3].mean().item(), rel=1e-6)
+    stats = bc.update(step=1)
+    assert bc.optimizer.step_count == 1 and stats["Losses/Pretraining Loss"] > 0  # 3 sequences // 2 per batch
+
+
+def test_gail_trains_beside_a_recurrent_policy():
+    hyper = PPOHyperparams(hidden_units=8, num_layers=1, batch_size=8, buffer_size=8, num_epoch=1, memory_size=8,
+                           sequence_length=4, reward_signals={"extrinsic": (0.99, 1.0), "gail": (0.99, 0.1)},
+                           reward_signal_networks={"gail": SignalNetwork(hidden_units=8, use_actions=True)})
+    trainer = PPOTrainer("B", HYBRID, hyper, seed=0)
+    demo = _demo(16)
+    trainer.providers["gail"].set_demonstrations(demo)
+    from trainer.ppo.buffer import Trajectory
+
+    out = trainer.policy.act([demo.obs[0][:10]],
+                             memories=np.zeros((10, 8), np.float32))
+    trainer.process_trajectory(Trajectory(
+        obs=[demo.obs[0][:10]], next_obs=[demo.obs[0][10]], rewards=np.ones(10, np.float32),
+        continuous_actions=out.continuous_raw, discrete_actions=out.discrete, log_probs=out.log_probs,
+        action_masks=None, done=True, interrupted=False, memories=np.zeros((10, 8), np.float32)))
+    stats = trainer.update()
+    assert math.isfinite(stats["Losses/GAIL Loss"]) and "Policy/GAIL Grad Mag Loss" in stats

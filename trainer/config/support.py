@@ -32,13 +32,6 @@ def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
         if name not in SUPPORTED_REWARD_SIGNALS:
             found.append((f"reward_signals.{name}",
                           f"remove it; supported reward signals: {', '.join(SUPPORTED_REWARD_SIGNALS)}"))
-    if ts.network_settings.memory is not None:  # demonstrations train feed-forward policies only for now
-        if ts.behavioral_cloning is not None:
-            found.append(("behavioral_cloning", "remove it or network_settings.memory; behavioral cloning of "
-                                                "a recurrent policy is not implemented yet"))
-        if "gail" in ts.reward_signals:
-            found.append(("reward_signals.gail", "remove it or network_settings.memory; GAIL with a "
-                                                 "recurrent policy is not implemented yet"))
     if ts.self_play is not None:
         found.append(("self_play", "remove the block; without it every team of a behavior trains one "
                                    "shared policy, as in ML-Agents without self-play"))
