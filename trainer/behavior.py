@@ -20,7 +20,7 @@ from trainer.artifacts.atomic import atomic_copy
 from trainer import crash_points
 from trainer.artifacts.checkpoints import CheckpointError, checkpoint_step, load_checkpoint, save_checkpoint
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
-from trainer.errors import UserError
+from trainer.errors import ConfigError, UserError
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.trainer import PPOTrainer
@@ -105,15 +105,21 @@ def attach_demonstrations(trainer, brain: str, spec: BehaviorSpec, settings, see
         if path not in loaded:
             loaded[path] = load_demonstrations(path, spec, f"behaviors.{brain}.{key}")
     bc = settings.behavioral_cloning
+    gail = settings.reward_signals.get("gail")
+    provider = getattr(trainer, "providers", {}).get("gail")
+    # a trainer that would ignore them (it has no hook for cloning, no GAIL provider) must not train quietly without
+    for wanted, missing, key in ((bc, not hasattr(trainer, "behavioral_cloning"), "behavioral_cloning"),
+                                 (gail, provider is None, "reward_signals.gail")):
+        if wanted is not None and missing:
+            raise ConfigError(f"behaviors.{brain}.{key}: not implemented for trainer_type "
+                              f"{settings.trainer_type} yet; remove it or use trainer_type ppo")
     if bc is not None:
         from trainer.behavioral_cloning import BehavioralCloning
 
         h = settings.hyperparameters
         trainer.behavioral_cloning = BehavioralCloning(trainer.policy, bc, loaded[bc.demo_path], h.learning_rate,
                                                        h.batch_size, seed + 7)
-    gail = settings.reward_signals.get("gail")
-    provider = getattr(trainer, "providers", {}).get("gail")
-    if gail is not None and provider is not None:
+    if gail is not None:
         provider.set_demonstrations(loaded[gail.demo_path])
 
 

@@ -358,3 +358,26 @@ def test_gail_trains_beside_a_recurrent_policy():
         action_masks=None, done=True, interrupted=False, memories=np.zeros((10, 8), np.float32)))
     stats = trainer.update()
     assert math.isfinite(stats["Losses/GAIL Loss"]) and "Policy/GAIL Grad Mag Loss" in stats
+
+
+def test_a_trainer_without_a_cloning_hook_or_gail_provider_refuses_them(tmp_path):
+    """After merges more trainer types exist: one that would ignore behavioral_cloning or gail
+    says so (exit 2) instead of training without them."""
+    from trainer.behavior import attach_demonstrations
+    from trainer.config.loader import load_run_options
+
+    path = _record(tmp_path / "a.demo", [(0.0, 0.0, False, [0.5], [2]), (1.0, 1.0, True, [], [])])
+    (tmp_path / "c.yaml").write_text(f"behaviors:\n  B:\n    behavioral_cloning: {{demo_path: {path}}}\n"
+                                     f"    reward_signals: {{extrinsic: {{}}, gail: {{demo_path: {path}}}}}\n")
+    settings = load_run_options(str(tmp_path / "c.yaml")).behaviors["B"]
+
+    class Bare:  # neither hook
+        policy = None
+
+    with pytest.raises(ConfigError, match="behaviors.B.behavioral_cloning: not implemented for trainer_type ppo"):
+        attach_demonstrations(Bare(), "B", HYBRID, settings, seed=0)
+    hyper = PPOHyperparams(hidden_units=8, num_layers=1, reward_signals={"extrinsic": (0.99, 1.0), "gail": (0.99, 1.0)},
+                           reward_signal_networks={"gail": SignalNetwork(hidden_units=8)})
+    trainer = PPOTrainer("B", HYBRID, hyper, seed=0)
+    attach_demonstrations(trainer, "B", HYBRID, settings, seed=0)
+    assert trainer.behavioral_cloning is not None and trainer.providers["gail"].demo is not None
