@@ -123,8 +123,9 @@ def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
     elif case == "missing_yaml":
         expect = "c.yaml"
     elif case == "unsupported_feature":  # refused before a simulator is launched, not dropped quietly
-        cfg.write_text("behaviors:\n  Basic:\n    trainer_type: ppo\n    self_play: {save_steps: 100}\n")
-        expect = "'behaviors.Basic.self_play'"
+        cfg.write_text("behaviors:\n  Basic:\n    trainer_type: sac\n    reward_signals:\n"
+                       "      extrinsic: {}\n      curiosity: {}\n")
+        expect = "'behaviors.Basic.reward_signals.curiosity'"
     elif case == "unknown_stub_task":
         cfg.write_text("behaviors: {}\n")
         args[2] = "stub:nosuch"

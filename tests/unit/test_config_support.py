@@ -30,7 +30,7 @@ def test_plain_ppo_config_is_supported(tmp_path):
     check_supported(opts)  # no error
 
 
-def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
+def test_imitation_self_play_memory_and_intrinsic_signals_are_all_supported_with_ppo(tmp_path):
     opts = options(tmp_path, """
         behaviors:
           Striker:
@@ -46,13 +46,9 @@ def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
           Goalie:
             trainer_type: ppo
     """)
-    assert [key for key, _ in unsupported(opts.behaviors["Striker"])] == ["self_play"]  # gail, bc: trained
+    assert unsupported(opts.behaviors["Striker"]) == []  # gail, behavioral_cloning, self_play: all trained
     assert unsupported(opts.behaviors["Goalie"]) == []
-    with pytest.raises(ConfigError) as info:
-        check_supported(opts)
-    message = str(info.value)
-    assert message.count("'behaviors.Striker.") == 1 and "Goalie" not in message
-    assert "'behaviors.Striker.self_play': remove the block" in message
+    check_supported(opts)  # no error
 
 
 def test_sac_is_supported_but_not_with_memory_or_intrinsic_signals(tmp_path):
@@ -74,11 +70,11 @@ def test_sac_is_supported_but_not_with_memory_or_intrinsic_signals(tmp_path):
 def test_default_settings_are_checked_too(tmp_path):
     opts = options(tmp_path, """
         default_settings:
-          trainer_type: ppo
-          self_play: {save_steps: 100}
+          trainer_type: sac
+          reward_signals: {extrinsic: {}, curiosity: {}}
         behaviors: {}
     """)
-    with pytest.raises(ConfigError, match=r"'default_settings\.self_play'"):
+    with pytest.raises(ConfigError, match=r"'default_settings\.reward_signals\.curiosity'"):
         check_supported(opts)
 
 

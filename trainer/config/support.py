@@ -32,9 +32,6 @@ def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
         if name not in SUPPORTED_REWARD_SIGNALS:
             found.append((f"reward_signals.{name}",
                           f"remove it; supported reward signals: {', '.join(SUPPORTED_REWARD_SIGNALS)}"))
-    if ts.self_play is not None:
-        found.append(("self_play", "remove the block; without it every team of a behavior trains one "
-                                   "shared policy, as in ML-Agents without self-play"))
     return found
 
 
