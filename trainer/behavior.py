@@ -33,7 +33,7 @@ def hyperparams_from_settings(settings) -> PPOHyperparams:
     """Map a behavior's TrainerSettings (trainer/config) onto the PPO room's own dataclass."""
     h = settings.hyperparameters
     n = settings.network_settings
-    return PPOHyperparams(
+    return PPOHyperparams(  # POCA's settings are PPO's without shared_critic
         batch_size=h.batch_size,
         buffer_size=h.buffer_size,
         learning_rate=h.learning_rate,
@@ -41,7 +41,7 @@ def hyperparams_from_settings(settings) -> PPOHyperparams:
         epsilon=h.epsilon,
         lambd=h.lambd,
         num_epoch=h.num_epoch,
-        shared_critic=h.shared_critic,
+        shared_critic=getattr(h, "shared_critic", False),
         learning_rate_schedule=h.learning_rate_schedule,
         beta_schedule=h.beta_schedule,
         epsilon_schedule=h.epsilon_schedule,
@@ -89,6 +89,10 @@ def make_trainer(brain: str, spec: BehaviorSpec, settings, seed: int, device: st
         from trainer.sac.trainer import SACTrainer
 
         trainer = SACTrainer(brain, spec, sac_hyperparams_from_settings(settings), seed=seed, device=device)
+    elif settings.trainer_type == "poca":
+        from trainer.poca.trainer import POCATrainer
+
+        trainer = POCATrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device)
     else:
         trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
                              use_numpy_update=use_numpy_update)

@@ -43,7 +43,7 @@ from trainer.distributed import RankLost, Ranks
 from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
 from trainer.errors import ConfigError, ResultsWriteError, UnityCommunicatorStoppedError, UserError
 from trainer.protocol.codec import NON_FINITE_STAT
-from trainer.rollout import AgentTracker, concat_masks
+from trainer.rollout import AgentTracker, GroupTracker, concat_masks
 from trainer.selfplay import TeamController
 from trainer.stop import EXIT_STOPPED, STOP
 
@@ -288,8 +288,8 @@ class RunState:
     def _tracker(self, env_id: int, behavior: str, runner: BehaviorRunner) -> AgentTracker:
         tracker = self.trackers.get((env_id, behavior))
         if tracker is None:
-            tracker = AgentTracker(runner.spec, runner.settings.time_horizon,
-                                   memory_size=runner.trainer.policy.memory_size)
+            kind = GroupTracker if getattr(runner.trainer, "uses_groups", False) else AgentTracker  # POCA
+            tracker = kind(runner.spec, runner.settings.time_horizon, memory_size=runner.trainer.policy.memory_size)
             self.trackers[(env_id, behavior)] = tracker
         return tracker
 
@@ -305,8 +305,7 @@ class RunState:
                 emit = lambda t, r=runner: r.self_play.count_ghost_steps(len(t))  # noqa: E731
             for env_id, decision, terminal, rows in steps:
                 tracker = self._tracker(env_id, behavior, runner)
-                tracker.on_terminal(terminal, emit)
-                slots = tracker.on_decision(decision, emit)
+                slots = tracker.on_step(terminal, decision, emit)
                 if learns:
                     runner.add_episodes(tracker.episodes.rewards)
                 self._episode_stats(runner.brain, tracker)
@@ -327,6 +326,9 @@ class RunState:
             if extrinsic is not None:  # as ML-Agents: what the extrinsic signal paid, group rewards included
                 paid = extrinsic.strength * (rewards + np.asarray(eps.group_rewards, dtype=np.float64))
                 self.reporter.add_many(brain, "Policy/Extrinsic Reward", paid, StatsAggregationMethod.AVERAGE)
+        if eps.group_returns:  # GroupTracker (POCA): agents whose whole group had finished with them
+            self.reporter.add_many(brain, "Environment/Group Cumulative Reward", np.asarray(eps.group_returns, np.float64),
+                                   StatsAggregationMethod.HISTOGRAM)  # as the reference: the mean and a histogram
 
     # ------------------------------------------------------------------ learning
     def learn(self, trajectories: list) -> None:

@@ -381,3 +381,23 @@ def test_a_trainer_without_a_cloning_hook_or_gail_provider_refuses_them(tmp_path
     trainer = PPOTrainer("B", HYBRID, hyper, seed=0)
     attach_demonstrations(trainer, "B", HYBRID, settings, seed=0)
     assert trainer.behavioral_cloning is not None and trainer.providers["gail"].demo is not None
+
+
+def test_poca_trains_gail_and_cloning_through_the_ppo_hooks():
+    from tests.unit.test_poca import trajectory
+    from trainer.poca.trainer import POCATrainer
+
+    hyper = PPOHyperparams(hidden_units=8, num_layers=1, batch_size=4, buffer_size=4, num_epoch=1,
+                           reward_signals={"extrinsic": (0.99, 1.0), "gail": (0.99, 0.1)},
+                           reward_signal_networks={"gail": SignalNetwork(hidden_units=8, use_actions=True)})
+    trainer = POCATrainer("B", HYBRID, hyper, seed=0)
+    demo = _demo(16)
+    trainer.providers["gail"].set_demonstrations(demo)
+    trainer.behavioral_cloning = BehavioralCloning(trainer.policy, BehavioralCloningSettings(demo_path="x"), demo,
+                                                   3e-4, 4, seed=0)
+    for _ in range(2):
+        stats = trainer.process_trajectory(trajectory(True, False, True))
+    assert "Policy/Gail Value Estimate" in stats and "Policy/Gail Baseline Estimate" in stats
+    stats = trainer.update()
+    assert math.isfinite(stats["Losses/GAIL Loss"]) and stats["Losses/Pretraining Loss"] > 0
+    assert {"Module:GAIL", "Optimizer:BC"} <= set(trainer.state_dict())

@@ -28,6 +28,9 @@ def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
             if name in SUPPORTED_REWARD_SIGNALS and name not in SAC_REWARD_SIGNALS:
                 found.append((f"reward_signals.{name}",
                               f"remove it; SAC trains with {', '.join(SAC_REWARD_SIGNALS)} only for now"))
+    if ts.trainer_type == "poca" and ts.network_settings.memory is not None:
+        found.append(("network_settings.memory", "remove it; POCA with an LSTM memory is not implemented yet "
+                                                 "(PPO trains with memory)"))
     for name in ts.reward_signals:
         if name not in SUPPORTED_REWARD_SIGNALS:
             found.append((f"reward_signals.{name}",
