@@ -24,6 +24,7 @@ from trainer.errors import UserError
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.trainer import PPOTrainer
+from trainer.selfplay import ELO_STAT, SelfPlay, TeamController
 
 logger = logging.getLogger("mlagents_like")
 
@@ -143,13 +144,18 @@ class BehaviorRunner:
     last_checkpoint_step: int = -1
     resumed_next_summary: int | None = None  # from the checkpoint's "Summaries" entry (--resume)
     writes_files: bool = True  # False on data-parallel ranks other than 0 (trainer/distributed.py)
+    self_play: SelfPlay | None = None  # ``self_play:`` while training (trainer/selfplay.py)
 
     @classmethod
     def create(cls, brain: str, spec: BehaviorSpec, settings, run_dir: str, seed: int, device: str,
-               training: bool, use_numpy_update: bool = True) -> "BehaviorRunner":
-        """``use_numpy_update``: MLAGENTS_LIKE_NUMPY_UPDATE (trainer.config.env_vars)."""
+               training: bool, use_numpy_update: bool = True,
+               teams: TeamController | None = None) -> "BehaviorRunner":
+        """``use_numpy_update``: MLAGENTS_LIKE_NUMPY_UPDATE (trainer.config.env_vars); ``teams``:
+        the run's learning-team controller, for a behavior with ``self_play`` (trainer/selfplay.py)."""
         trainer = make_trainer(brain, spec, settings, seed, device, use_numpy_update)
         runner = cls(brain, spec, settings, trainer, CheckpointPaths(run_dir, brain), training)
+        if settings.self_play is not None and training:  # inference: every team plays the trained policy
+            runner.self_play = SelfPlay(settings.self_play, trainer, teams or TeamController(), seed)
         os.makedirs(runner.paths.folder, exist_ok=True)
         return runner
 
@@ -174,6 +180,8 @@ class BehaviorRunner:
         if reset_step:
             self.trainer.restart_counters()
         else:
+            if self.self_play is not None and "SelfPlay" in state:  # the window, ELO and schedule
+                self.self_play.load_state_dict(state["SelfPlay"])
             if "Summaries" in state:
                 self.resumed_next_summary = int(state["Summaries"]["next_step"])
             if self.saves_replay_buffer and self.training:  # --resume continues the replay buffer it saved
@@ -223,6 +231,9 @@ class BehaviorRunner:
             )
         step, path, state = chosen
         self._load_state(path, state, reset_step=False)
+        elo = status.get_elo(self.brain)
+        if self.self_play is not None and "SelfPlay" not in state and elo is not None:
+            self.self_play.start_from_elo(elo)  # e.g. a run of mlagents-learn: its rating, a new window
         self.tidy_after_resume(status)
 
     def tidy_after_resume(self, status: TrainingStatus) -> None:
@@ -301,17 +312,34 @@ class BehaviorRunner:
         return not self.training or self.trainer.step > self.settings.max_steps
 
     # ----------------------------------------------------------------------------- experience
+    def policy_for(self, team: int):
+        """THE place that decides which policy acts for a team of this behavior: the trainer's,
+        unless self-play gives the team a snapshot (trainer/selfplay.py)."""
+        if self.self_play is None:
+            return self.trainer.policy
+        return self.self_play.policy_for(team)
+
+    def learns_from(self, team: int) -> bool:
+        """Whether the trajectories of ``team`` train this behavior (all teams without self-play)."""
+        return self.self_play is None or self.self_play.is_learning(team)
+
     def add_trajectory(self, traj: Trajectory, status: TrainingStatus) -> dict[str, float]:
         """Checkpoint if this trajectory crosses the next interval (named with the step before it),
-        then hand it to PPO."""
+        then hand it to the trainer (with self-play, an episode's end is also a game for the ELO)."""
         if self.done:  # inference, or past max_steps while other behaviors still train
             return {}
+        elo = None
+        if self.self_play is not None and len(traj):
+            elo = self.self_play.rate_trajectory(float(traj.rewards[-1]), traj.done, traj.interrupted)
         if self.trainer.step + len(traj) >= self.next_checkpoint:
             if self.writes_files:
                 self.save_checkpoint(status, summary_follows=self.trainer.step + len(traj) >= self.next_summary)
             while self.next_checkpoint <= self.trainer.step + len(traj):
                 self.next_checkpoint += self.checkpoint_interval
-        return self.trainer.process_trajectory(traj)
+        stats = self.trainer.process_trajectory(traj)
+        if elo is not None:
+            stats = {**stats, ELO_STAT: elo}
+        return stats
 
     def add_episodes(self, returns: list[float]) -> None:
         self.reward_buffer.extend(returns)
@@ -336,6 +364,9 @@ class BehaviorRunner:
         if not final and summary_follows:
             next_summary += self.settings.summary_freq
         state["Summaries"] = {"next_step": torch.tensor(next_summary, dtype=torch.int64)}
+        if self.self_play is not None:
+            state["SelfPlay"] = self.self_play.state_dict()
+            status.set_elo(self.brain, self.self_play.current_elo)
         save_checkpoint(pt_path, state)
         crash_points.reached("checkpoint.pt")
         self.trainer.export_onnx(onnx_path)

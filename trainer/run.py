@@ -3,7 +3,7 @@
 Per iteration (each simulator has just sent its message):
   1. new behaviors get a ``BehaviorRunner`` (trainer, checkpoint bookkeeping);
   2. ONE batched forward pass per behavior computes actions for all deciding agents across all
-     envs;
+     envs (the brain's policy, or with self-play a team's snapshot: ``BehaviorRunner.policy_for``);
   3. the actions go out at once, so the simulators step while we work;
   4. meanwhile every agent's experience is assembled (rollout.AgentTracker), trajectories go to
      PPO (GAE, update when the buffer is full), summaries, checkpoints, curriculum; then we wait
@@ -29,7 +29,7 @@ from trainer import crash_points
 from trainer.artifacts.atomic import WRITE_ERRNOS, results_write_error
 from trainer.artifacts.behaviors import BehaviorRecorder
 from trainer.artifacts.console import ConsoleWriter, ProgressLine
-from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, GaugeWriter, StatsReporter
+from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, PROPERTY_SELF_PLAY, GaugeWriter, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
 from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
@@ -44,6 +44,7 @@ from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
 from trainer.errors import ConfigError, ResultsWriteError, UnityCommunicatorStoppedError, UserError
 from trainer.protocol.codec import NON_FINITE_STAT
 from trainer.rollout import AgentTracker, concat_masks
+from trainer.selfplay import TeamController
 from trainer.stop import EXIT_STOPPED, STOP
 
 if TYPE_CHECKING:  # torch is imported only once the simulators are launched (see run_training)
@@ -181,6 +182,7 @@ class RunState:
     runners: dict[str, BehaviorRunner] = field(default_factory=dict)
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
     pending_reset: bool = False
+    teams: TeamController = field(default_factory=TeamController)  # self-play's learning team
     start_time: float = field(default_factory=time.time)
     _last_progress: float = float("-inf")
 
@@ -207,7 +209,7 @@ class RunState:
         seed = opts.env_settings.seed + len(self.runners)
         runner = BehaviorRunner.create(brain, spec, settings, self.run_dir, seed,
                                        opts.torch_settings.device or "cpu", training=not ck.inference,
-                                       use_numpy_update=self.env_vars.numpy_update)
+                                       use_numpy_update=self.env_vars.numpy_update, teams=self.teams)
         if not self.ranks.is_main:
             pass  # rank 0 restores and sends its state to this rank (Ranks.agree)
         elif ck.resume and not ck.inference:
@@ -224,6 +226,8 @@ class RunState:
             self.reporter.resume_from(brain, runner.next_summary - 1)
         self.runners[brain] = runner
         self.reporter.add_property(brain, PROPERTY_HYPERPARAMETERS, settings_as_dict(settings))
+        if runner.self_play is not None:
+            self.reporter.add_property(brain, PROPERTY_SELF_PLAY, True)
         return runner
 
     # ------------------------------------------------------------------ decisions
@@ -241,6 +245,7 @@ class RunState:
                 by_behavior.setdefault(behavior, []).append(env_id)
         for behavior, env_ids in by_behavior.items():
             runner = self.ensure_runner(behavior)
+            policy = runner.policy_for(brain_name_of(behavior)[1])  # self-play: maybe a snapshot
             # each env's deciding agents are the rows [start, end) of the one batched forward pass
             steps, start = [], 0
             for env_id in env_ids:
@@ -249,7 +254,7 @@ class RunState:
                 start += len(decision)
             out = masks = memories = None
             if start:
-                out, masks, memories = self._act(runner, behavior, [s for s in steps if len(s[1])])
+                out, masks, memories = self._act(runner, policy, behavior, [s for s in steps if len(s[1])])
                 for env_id, decision, _, rows in steps:
                     if len(decision):
                         actions[env_id][behavior] = ActionTuple(out.env_actions.continuous[rows],
@@ -257,9 +262,9 @@ class RunState:
             decided.append((runner, behavior, steps, out, masks, memories))
         return actions, decided
 
-    def _act(self, runner: BehaviorRunner, behavior: str, steps: list):
-        """One forward pass for the deciding agents of ``steps`` (each env's (env_id, decision,
-        terminal, rows)). Returns (policy output, masks, the memories it started from or None)."""
+    def _act(self, runner: BehaviorRunner, policy, behavior: str, steps: list):
+        """One forward pass of ``policy`` for the deciding agents of ``steps`` (each env's (env_id,
+        decision, terminal, rows)). Returns (policy output, masks, the memories it started from or None)."""
         spec = runner.spec
         branches = spec.action_spec.discrete_branches
         deciding = [decision for _, decision, _, _ in steps]
@@ -272,12 +277,12 @@ class RunState:
             masks = None if ms[0] is None else np.concatenate(ms)
         memories = None
         crash_points.reached("act")
-        if runner.trainer.policy.memory_size:  # each agent continues from its own LSTM state
+        if policy.memory_size:  # each agent continues from its own LSTM state
             memories = np.concatenate([self._tracker(env_id, behavior, runner).memories_for(decision.agent_id)
                                        for env_id, decision, _, _ in steps])
         with self.timers.scope("policy.act"):
-            out = runner.trainer.policy.act(obs, masks, deterministic=runner.settings.network_settings.deterministic,
-                                            memories=memories)
+            out = policy.act(obs, masks, deterministic=runner.settings.network_settings.deterministic,
+                             memories=memories)
         return out, masks, memories
 
     def _tracker(self, env_id: int, behavior: str, runner: BehaviorRunner) -> AgentTracker:
@@ -293,12 +298,17 @@ class RunState:
         rewards paired with the previous actions, finished trajectories appended to
         ``trajectories``, the new observations and actions remembered, episode statistics."""
         for runner, behavior, steps, out, masks, memories in decided:
-            emit = lambda t, r=runner: trajectories.append((r, t))  # noqa: E731
+            learns = runner.learns_from(brain_name_of(behavior)[1])
+            if learns:
+                emit = lambda t, r=runner: trajectories.append((r, t))  # noqa: E731
+            else:  # a self-play team playing a snapshot: its experience is only counted
+                emit = lambda t, r=runner: r.self_play.count_ghost_steps(len(t))  # noqa: E731
             for env_id, decision, terminal, rows in steps:
                 tracker = self._tracker(env_id, behavior, runner)
                 tracker.on_terminal(terminal, emit)
                 slots = tracker.on_decision(decision, emit)
-                runner.add_episodes(tracker.episodes.rewards)
+                if learns:
+                    runner.add_episodes(tracker.episodes.rewards)
                 self._episode_stats(runner.brain, tracker)
                 if len(decision):
                     tracker.on_actions(slots, out.continuous_raw[rows], out.discrete[rows],
@@ -339,6 +349,8 @@ class RunState:
                 self.ranks.after_update(runner)
                 for key, value in stats.items():
                     self.reporter.add(runner.brain, key, float(value), StatsAggregationMethod.AVERAGE)
+            if runner.self_play is not None and not runner.done and runner.self_play.advance(runner.trainer.step):
+                self.pending_reset = True  # a new learning team starts from fresh episodes
             self._maybe_summarize(runner)
         self._update_curriculum()
 
@@ -493,6 +505,9 @@ def pool_settings_of(options, env_vars: EnvVars) -> PoolSettings:
         raise UserError(f"{world} data-parallel ranks average PPO gradients only; this config uses "
                         f"trainer_type {', '.join(not_ppo)}. Run it as one rank (srun -n 1, or without "
                         "torchrun), or use PPO (docs/cluster.md).")
+    if world > 1 and any(s is not None and s.self_play is not None for s in configured):
+        raise UserError(f"{world} data-parallel ranks cannot share one self-play schedule; run a config with "
+                        "self_play as one rank (srun -n 1, or without torchrun).")
     return PoolSettings(
         env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
         num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,

@@ -14,6 +14,10 @@ One decision step, as the Academy runs it with a DecisionRequester on every agen
 
 ``environment_reset`` is the RESET command: every agent starts a new episode (new ids), no
 terminal infos are sent, pending rewards are dropped.
+
+A task may expose several behaviors sharing its physics (``Task.behaviors``, e.g. one per team
+of ``soccer``): each gets its own list of infos and its own actions (``collect_batches``,
+``apply_action_list(..., behavior=i)``), and one ``advance`` steps them all together.
 """
 from __future__ import annotations
 
@@ -45,7 +49,8 @@ class Academy:
         self.decision_period = int(decision_period or task.decision_period)
         if self.decision_period < 1:
             raise ValueError(f"decision_period must be >= 1, got {self.decision_period}")
-        self.behavior_key = f"{task.behavior_name}?team={task.team_id}"
+        self.behaviors = task.behaviors()  # [(behavior key, rows of its agents)]
+        self.behavior_key = self.behaviors[0][0]
         # one counter per process (Unity's is static): pass the same one to every academy
         self.episode_counter = episode_counter or EpisodeIdCounter()
         n = task.num_agents
@@ -54,6 +59,7 @@ class Academy:
         self.continuous = np.zeros((n, task.action_spec.continuous_size), dtype=np.float32)
         self.discrete = np.zeros((n, len(task.action_spec.discrete_branches)), dtype=np.int32)
         self.pending_done_infos = EncodedInfos()
+        self.pending_done_by_behavior: list[EncodedInfos] = [EncodedInfos() for _ in self.behaviors]
         self.pending_stats: list[Stat] = []
         self.completed_episodes = 0
         self.environment_reset()
@@ -67,6 +73,24 @@ class Academy:
         self.continuous[:] = 0.0
         self.discrete[:] = 0
         self.pending_done_infos = EncodedInfos()
+        self.pending_done_by_behavior = [EncodedInfos() for _ in self.behaviors]
+
+    def collect_batches(self) -> list[tuple[str, EncodedInfos]]:
+        """``collect_encoded`` per behavior of the task: [(behavior key, its infos)]."""
+        if len(self.behaviors) == 1:
+            return [(self.behavior_key, self.collect_encoded())]
+        task = self.task
+        observations, mask, groups = task.observe(), task.action_mask(), task.group_ids()
+        batches = []
+        for i, (key, rows) in enumerate(self.behaviors):
+            decisions = encode_agent_infos(
+                task.observation_specs, [o[rows] for o in observations], self.pending_reward[rows],
+                self.episode_ids[rows], done=False, action_mask=None if mask is None else mask[rows],
+                compressions=task.observation_compressions, group_ids=None if groups is None else groups[rows])
+            batches.append((key, self.pending_done_by_behavior[i] + decisions))
+        self.pending_done_by_behavior = [EncodedInfos() for _ in self.behaviors]
+        self.pending_reward[:] = 0.0
+        return batches
 
     def collect_encoded(self) -> EncodedInfos:
         """Terminal infos since the last message, then one decision request per agent
@@ -90,45 +114,48 @@ class Academy:
         stats, self.pending_stats = self.pending_stats, []
         return stats
 
-    def apply_actions(self, actions: Sequence[agent_action_pb2.AgentActionProto]) -> None:
-        """Actions for the decision requests of the last message, by position.
+    def apply_actions(self, actions: Sequence[agent_action_pb2.AgentActionProto], behavior: int = 0) -> None:
+        """Actions for the decision requests of the last message, by position (``behavior``: the
+        index in ``behaviors`` they are for).
 
         An empty list means "no actions" (the agents act with zeros), as in Unity.
         """
-        n = self.task.num_agents
+        key, rows = self.behaviors[behavior]
+        n = self.task.num_agents if isinstance(rows, slice) else len(rows)
         if len(actions) == 0:
-            self.continuous[:] = 0.0
-            self.discrete[:] = 0
+            self.continuous[rows] = 0.0
+            self.discrete[rows] = 0
             return
         if len(actions) != n:
             raise ActionCountError(
-                f"The trainer sent {len(actions)} actions for behavior {self.behavior_key!r} but "
+                f"The trainer sent {len(actions)} actions for behavior {key!r} but "
                 f"{n} agents requested a decision; it must send one action per non-done agent info, "
                 "in the same order."
             )
         spec = self.task.action_spec
         if spec.continuous_size:
-            self.continuous[:] = _action_rows(list(map(_CONTINUOUS, actions)), spec.continuous_size,
-                                              "continuous", np.float32)
+            self.continuous[rows] = _action_rows(list(map(_CONTINUOUS, actions)), spec.continuous_size,
+                                                 "continuous", np.float32)
         if spec.discrete_branches:
-            self.discrete[:] = _action_rows(list(map(_DISCRETE, actions)), len(spec.discrete_branches),
-                                            "discrete", np.int32)
+            self.discrete[rows] = _action_rows(list(map(_DISCRETE, actions)), len(spec.discrete_branches),
+                                               "discrete", np.int32)
 
-    def apply_action_list(self, actions) -> None:
+    def apply_action_list(self, actions, behavior: int = 0) -> None:
         """``apply_actions`` for a ListAgentActionProto (or None): many agents are read from its
         serialized bytes at once (``protos.records``), few or unusual ones one by one."""
         if actions is None:
-            self.apply_actions([])
+            self.apply_actions([], behavior)
             return
+        key, rows = self.behaviors[behavior]
         n = len(actions.value)
-        if n == self.task.num_agents and n >= records.MIN_ROWS:
+        if n == self.task.num_agents and n >= records.MIN_ROWS and isinstance(rows, slice):
             spec = self.task.action_spec
-            decoded = records.decode_actions(self.behavior_key, actions.SerializeToString(),
+            decoded = records.decode_actions(key, actions.SerializeToString(),
                                              spec.continuous_size, len(spec.discrete_branches))
             if decoded is not None:
                 self.continuous[:], self.discrete[:] = decoded
                 return
-        self.apply_actions(actions.value)
+        self.apply_actions(actions.value, behavior)
 
     def advance(self) -> None:
         """Run ``decision_period`` control steps; finished agents are reset on the spot."""
@@ -149,13 +176,16 @@ class Academy:
     def _end_episodes(self, done: np.ndarray, interrupted: np.ndarray) -> None:
         """Queue the terminal infos of ``done`` [n] agents, then start their next episode."""
         task = self.task
-        observations = [obs[done] for obs in task.observe()]
-        groups = task.group_ids()
-        self.pending_done_infos += encode_agent_infos(
-            task.observation_specs, observations, self.pending_reward[done], self.episode_ids[done],
-            done=True, interrupted=interrupted[done], compressions=task.observation_compressions,
-            group_ids=None if groups is None else groups[done],
-        )
+        if len(self.behaviors) == 1:
+            observations = [obs[done] for obs in task.observe()]
+            groups = task.group_ids()
+            self.pending_done_infos += encode_agent_infos(
+                task.observation_specs, observations, self.pending_reward[done], self.episode_ids[done],
+                done=True, interrupted=interrupted[done], compressions=task.observation_compressions,
+                group_ids=None if groups is None else groups[done],
+            )
+        else:
+            self._queue_done_by_behavior(done, interrupted)
         finished = int(done.sum())
         self.completed_episodes += finished
         if self.completed_episodes // 100 != (self.completed_episodes - finished) // 100:
@@ -165,6 +195,20 @@ class Academy:
         self.episode_ids[done] = self.episode_counter.take(finished)
         self.continuous[done] = 0.0
         self.discrete[done] = 0
+
+    def _queue_done_by_behavior(self, done: np.ndarray, interrupted: np.ndarray) -> None:
+        """``_end_episodes``' terminal infos for a task with several behaviors, each to its own list."""
+        task = self.task
+        observations, groups = task.observe(), task.group_ids()
+        for i, (_, rows) in enumerate(self.behaviors):
+            mine = np.zeros(task.num_agents, dtype=bool)
+            mine[rows] = True
+            mine &= done
+            if mine.any():
+                self.pending_done_by_behavior[i] += encode_agent_infos(
+                    task.observation_specs, [o[mine] for o in observations], self.pending_reward[mine],
+                    self.episode_ids[mine], done=True, interrupted=interrupted[mine],
+                    compressions=task.observation_compressions, group_ids=None if groups is None else groups[mine])
 
 
 def _action_rows(rows: list, width: int, kind: str, dtype) -> np.ndarray:

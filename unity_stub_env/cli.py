@@ -228,9 +228,10 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
             tasks.append(make_task(name, num_areas=num_areas, seed=seed + index, env_params=env_params))
     for task in tasks:
         academy = Academy(task, args.decision_period, counter)  # construction is the first RESET
-        academies.append((academy, build_brain_parameters(academy.behavior_key, task.action_spec)))
-        logger.info("Task %s: behavior %s, %d agents (%d areas), seed %d, decision period %d",
-                    task.name, academy.behavior_key, task.num_agents, num_areas, task.seed,
+        brains = {key: build_brain_parameters(key, task.action_spec) for key, _ in academy.behaviors}
+        academies.append((academy, brains))
+        logger.info("Task %s: behavior(s) %s, %d agents (%d areas), seed %d, decision period %d",
+                    task.name, ", ".join(brains), task.num_agents, num_areas, task.seed,
                     academy.decision_period)
     exchanges = 0
     while True:
@@ -239,7 +240,8 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
             logging.shutdown()
             os._exit(3)
         exchanges += 1
-        batches = [(academy.behavior_key, academy.collect_encoded(), brain) for academy, brain in academies]
+        batches = [(key, infos, brains[key]) for academy, brains in academies
+                   for key, infos in academy.collect_batches()]
         stats = [stat for academy, _ in academies for stat in academy.take_stats()]
         rl_input = communicator.exchange_many(batches, encode_stats(stats))
         side_channels.apply(rl_input.side_channel)
@@ -252,7 +254,8 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
                 academy.environment_reset()
             continue
         for academy, _ in academies:
-            academy.apply_action_list(rl_input.agent_actions.get(academy.behavior_key))
+            for index, (key, _) in enumerate(academy.behaviors):
+                academy.apply_action_list(rl_input.agent_actions.get(key), index)
             academy.advance()
 
 

@@ -136,3 +136,17 @@ def test_sac_under_two_ranks_is_one_message_and_exit_2(tmp_path, env_no_proxy):
     assert "average PPO gradients only" in r.stderr and "trainer_type sac" in r.stderr, r.stderr[-2000:]
     assert "Traceback" not in r.stderr
     assert not (tmp_path / "results" / "sac").exists()
+
+
+def test_self_play_under_two_ranks_is_one_message_and_exit_2(tmp_path, env_no_proxy):
+    """One self-play schedule per run: a self_play config under WORLD_SIZE=2 is refused at start."""
+    cfg = tmp_path / "sp.yaml"
+    cfg.write_text("behaviors:\n  Soccer:\n    max_steps: 100\n    self_play: {save_steps: 50}\n")
+    args = [str(cfg), "--env", "stub:soccer", "--run-id", "sp", "--results-dir", str(tmp_path / "results"),
+            "--base-port", str(free_port_block(2))]
+    r = subprocess.run([sys.executable, "-m", "trainer.cli", *args], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=120, env={**_env(env_no_proxy), "RANK": "0", "WORLD_SIZE": "2",
+                                         "MASTER_ADDR": "127.0.0.1", "MASTER_PORT": str(free_port_block(1))})
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert "cannot share one self-play schedule" in r.stderr and "Traceback" not in r.stderr, r.stderr[-2000:]
+    assert not (tmp_path / "results" / "sp").exists()

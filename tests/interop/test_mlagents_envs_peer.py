@@ -44,8 +44,14 @@ DOCUMENTED_SPECS = {
                                "name": "VectorSensor_size298"}],
         "action_spec": {"continuous_size": 34, "discrete_branches": []},
     }},
+    "soccer": {f"Soccer?team={team}": {  # one behavior per team, identical specs
+        "observation_specs": [{"shape": [12], "dimension_property": [1], "observation_type": 0,
+                               "name": "VectorSensor_size12"}],
+        "action_spec": {"continuous_size": 0, "discrete_branches": [3, 3]},
+    } for team in (0, 1)},
 }
-AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14, "mimic": 8, "runner": 4, "creature": 1}  # agents per area; one area by default
+AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14, "mimic": 8, "runner": 4, "creature": 1,
+          "soccer": 2}  # agents per area over all its behaviors; one area by default
 STEPS = 500
 
 
@@ -68,7 +74,8 @@ def test_unity_environment_runs_stub_task(task, run_peer, stub_executable, free_
 
     assert result["behavior_specs"] == DOCUMENTED_SPECS[task]
     assert result["id_errors"] == []
-    (behavior,) = DOCUMENTED_SPECS[task]
+    behavior = next(iter(DOCUMENTED_SPECS[task]))
+    per_behavior = AGENTS[task] // len(DOCUMENTED_SPECS[task])
     # Every agent decides at every env.step() (decision_period steps of physics in between),
     # and an agent that finished also shows up once as a terminal step.
     assert result["decision_steps"] == (STEPS + 1) * AGENTS[task]  # the reset + every step
@@ -76,7 +83,7 @@ def test_unity_environment_runs_stub_task(task, run_peer, stub_executable, free_
     assert result["returncode"] == 0, "the stub must exit cleanly on the trainer's 400"
     assert is_gone(result["pid"])
     first_obs = np.asarray(result["first_obs"][behavior])
-    assert first_obs.shape == (AGENTS[task], DOCUMENTED_SPECS[task][behavior]["observation_specs"][0]["shape"][0])
+    assert first_obs.shape == (per_behavior, DOCUMENTED_SPECS[task][behavior]["observation_specs"][0]["shape"][0])
     if task == "basic":
         # one-hot positions: exactly one 1.0 per row
         np.testing.assert_array_equal(first_obs.sum(axis=1), np.ones(AGENTS[task]))

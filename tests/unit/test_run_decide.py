@@ -53,7 +53,8 @@ class TracingPolicy:
 def test_one_forward_pass_per_behavior_and_rows_go_back_to_their_simulator():
     policy = TracingPolicy()
     runner = SimpleNamespace(spec=SPEC, trainer=SimpleNamespace(policy=policy),
-                             settings=SimpleNamespace(network_settings=SimpleNamespace(deterministic=False)))
+                             settings=SimpleNamespace(network_settings=SimpleNamespace(deterministic=False)),
+                             policy_for=lambda team: policy)  # BehaviorRunner.policy_for without self-play
     state = RunState(options=None, run_dir="", pool=None, params=None, reporter=None, status=None,
                      timers=TimerTree(), progress=None, routers=[], runners={"Ball": runner})
     ids = {0: [5, 9], 1: [], 2: [40, 41, 42], 3: [7]}

@@ -48,6 +48,7 @@ METADATA = "metadata"
 LESSON_NUM = "lesson_num"
 CHECKPOINTS = "checkpoints"
 FINAL_CHECKPOINT = "final_checkpoint"
+ELO = "elo"
 
 
 def current_metadata() -> dict[str, str]:
@@ -192,6 +193,14 @@ class TrainingStatus:
 
     def set_final_checkpoint(self, brain: str, checkpoint: CheckpointEntry) -> None:
         self._category(brain)[FINAL_CHECKPOINT] = checkpoint.to_dict()
+
+    def set_elo(self, brain: str, elo: float) -> None:
+        """Self-play: the learning policy's rating at the last checkpoint (ML-Agents' "elo")."""
+        self._category(brain)[ELO] = float(elo)
+
+    def get_elo(self, brain: str) -> float | None:
+        entry = self.state.get(brain)
+        return entry.get(ELO) if isinstance(entry, dict) else None
 
     def final_checkpoint(self, brain: str) -> CheckpointEntry | None:
         entry = self.state.get(brain)

@@ -34,9 +34,6 @@ def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
                           f"remove it; supported reward signals: {', '.join(SUPPORTED_REWARD_SIGNALS)}"))
     if ts.behavioral_cloning is not None:
         found.append(("behavioral_cloning", "remove the block (no imitation learning yet)"))
-    if ts.self_play is not None:
-        found.append(("self_play", "remove the block; without it every team of a behavior trains one "
-                                   "shared policy, as in ML-Agents without self-play"))
     return found
 
 

@@ -15,6 +15,7 @@ from unity_stub_env.tasks.creature import CreatureTask
 from unity_stub_env.tasks.dodge import DodgeTask
 from unity_stub_env.tasks.mimic import MimicTask
 from unity_stub_env.tasks.runner import RunnerTask
+from unity_stub_env.tasks.soccer import SoccerTask
 
 TASKS: dict[str, type[Task]] = {
     BasicTask.name: BasicTask,
@@ -23,6 +24,7 @@ TASKS: dict[str, type[Task]] = {
     CreatureTask.name: CreatureTask,
     MimicTask.name: MimicTask,
     RunnerTask.name: RunnerTask,
+    SoccerTask.name: SoccerTask,
 }
 
 
@@ -35,4 +37,4 @@ def make_task(name: str, num_areas: int = 1, seed: int = 0,
 
 
 __all__ = ["TASKS", "make_task", "Task", "TaskStep", "EnvironmentParameters", "BasicTask", "Ball3DTask", "DodgeTask", "CreatureTask",
-           "MimicTask", "RunnerTask"]
+           "MimicTask", "RunnerTask", "SoccerTask"]

@@ -105,6 +105,11 @@ class Task:
     def group_ids(self) -> np.ndarray | None:
         return None
 
+    def behaviors(self) -> list[tuple[str, slice | np.ndarray]]:
+        """(behavior key as sent, the rows of its agents): one behavior with every agent, unless
+        the task has several sharing one physics (e.g. ``soccer``: one behavior per team)."""
+        return [(f"{self.behavior_name}?team={self.team_id}", slice(None))]
+
     # Helpers -------------------------------------------------------------------------------
     def all_agents(self, mask: np.ndarray | None) -> np.ndarray:
         """bool [n]: the given mask, or every agent when None."""
