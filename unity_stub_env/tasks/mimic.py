@@ -38,10 +38,9 @@ Actions, 26 continuous in [-1, 1], one per axis in mimic.xml's actuator order (`
     untrained policy stands in the PD's rest pose and the whole range stays reachable (zero
     actions: stand, arms and squat kept 10 s, r_r 1.00 / 0.05 / 0.29; a push of 10 N s every 2 s
     withstood in 100 % of trials, 15 N s in 62 %). Exploration is the hard part of this mode: PPO's
-    Gaussian starts at std 1 in action units, i.e. random targets over each whole range at 50 Hz,
-    and white noise of std 0.1 (0.05) around the standing pose already topples the ragdoll in
-    ~1.3 s (~3 s); bench runs therefore start from a checkpoint whose std is 0.05
-    (``bench/mimic/warm_start.py``, DeepMimic's exploration scale);
+    Gaussian starts at std 1/3 in action units (std 1, sent as clamp(a, -3, 3) / 3), and white
+    noise of std 0.1 (0.05) around the standing pose already topples the ragdoll in ~1.3 s (~3 s);
+    bench runs start from a checkpoint with a smaller std (``bench/mimic/warm_start.py``);
   r > 0 (DeepMimic-like, our option): target = reference angle + a r (high - low) / 2, clipped to
     the limits: zero actions track the reference and the policy learns corrections.
 
