@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from protos.types import BehaviorSpec, DecisionSteps, TerminalSteps
-from trainer.ppo.buffer import Trajectory
+from trainer.ppo.buffer import GroupColumns, Trajectory
 
 
 @dataclass
@@ -37,6 +37,8 @@ class EpisodeStats:
     rewards: list[float] = field(default_factory=list)
     lengths: list[int] = field(default_factory=list)
     group_rewards: list[float] = field(default_factory=list)
+    # GroupTracker: the group rewards of each agent whose whole group had finished when it did
+    group_returns: list[float] = field(default_factory=list)
 
 
 class AgentTracker:
@@ -168,6 +170,12 @@ class AgentTracker:
         self.length[slot] = 0
         return traj
 
+    def on_step(self, ts: TerminalSteps, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
+        """One message's terminal then decision steps of this behavior (``on_terminal``, then
+        ``on_decision``, whose slots it returns)."""
+        self.on_terminal(ts, emit)
+        return self.on_decision(ds, emit)
+
     def on_terminal(self, ts: TerminalSteps, emit: Callable[[Trajectory], None]) -> None:
         """Agents whose episode ended: final reward, trajectory with done, episode stats."""
         if len(ts) == 0:
@@ -194,6 +202,26 @@ class AgentTracker:
             del self._slot_of[int(ts.agent_id[k])]
             self._free.append(slot)
         self._index = None
+
+    def on_lost_terminal(self, agent_ids: np.ndarray, emit: Callable[[Trajectory], None]) -> int:
+        """Agents whose episode ended with a step the codec dropped for NaN/Inf
+        (trainer/protocol/codec.py): the decision that awaited that step's reward is discarded,
+        the experiences before it go out as a trajectory that ends interrupted (done, bootstrapped
+        from the value of that decision's observation, the last finite one), and the episode is
+        closed without entering the episode statistics (its return is unknown). Returns the
+        number of episodes closed. (With no experience left to emit, a trainer's per-episode
+        entries for curiosity/memory sums stay until the run ends: one small entry per case.)"""
+        found, known = self._lookup(np.asarray(agent_ids, dtype=np.int64))
+        closed = 0
+        for agent, slot in zip(np.asarray(agent_ids)[known].tolist(), found[known].tolist()):
+            n = int(self.length[slot])
+            if n > 0:
+                emit(self._emit(slot, int(agent), [buf[slot, n] for buf in self.obs], True, True))
+            del self._slot_of[int(agent)]
+            self._free.append(slot)
+            closed += 1
+        self._index = None
+        return closed
 
     def on_decision(self, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
         """Agents asking for a decision: pair their reward with the previous action, cut at
@@ -278,6 +306,94 @@ class AgentTracker:
     def drain_episodes(self) -> EpisodeStats:
         out, self.episodes = self.episodes, EpisodeStats()
         return out
+
+
+class GroupTracker(AgentTracker):
+    """AgentTracker that also records, for each experience, what the agent's teammates (same
+    ``group_id`` > 0 in the same simulator) did at that step, as ML-Agents' AgentProcessor
+    assembles group trajectories for MA-POCA (docs/poca.md):
+
+    - a teammate's status at a step is the observation it acted on, the action it took and the
+      individual reward that came for it, from every agent of the group whose pending decision
+      this message closes (its terminal or its next decision); an agent that left the group is no
+      longer a teammate from the next message;
+    - a trajectory's ``group.next_obs`` are the teammates' observations in the message that ends
+      it, and ``group.all_done`` says whether every teammate's episode ended in it too: only then
+      is the group's episode over and the value not bootstrapped;
+    - ``EpisodeStats.group_returns``: the group rewards of an agent whose group finished with it.
+    """
+
+    def __init__(self, spec: BehaviorSpec, time_horizon: int, capacity: int = 16, memory_size: int = 0):
+        super().__init__(spec, time_horizon, capacity, memory_size)
+        self._mates: dict[int, list[list[tuple]]] = {}  # slot -> per experience, the teammates' statuses
+        self._ends: dict[int, tuple[list[list[np.ndarray]], bool]] = {}  # agent -> (next obs of mates, all done)
+
+    def on_step(self, ts: TerminalSteps, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
+        statuses: dict[int, dict[int, tuple]] = {}  # group -> agent -> (obs, cont, disc, done, reward)
+        current: dict[int, dict[int, list[np.ndarray]]] = {}  # group -> agent -> observations now
+        closing: list[tuple[int, int, int]] = []  # (agent, group, slot) of every pending decision closed now
+        for steps, done in ((ts, True), (ds, False)):
+            if len(steps) == 0:
+                continue
+            found, known = self._lookup(np.asarray(steps.agent_id, dtype=np.int64))
+            for k in np.nonzero(known)[0]:
+                slot = int(found[k])
+                if not self.pending[slot]:
+                    continue
+                agent, group, t = int(steps.agent_id[k]), int(steps.group_id[k]), int(self.length[slot])
+                closing.append((agent, group, slot))
+                if group > 0:
+                    statuses.setdefault(group, {})[agent] = (
+                        [buf[slot, t] for buf in self.obs], self.cont[slot, t], self.disc[slot, t], done,
+                        float(steps.reward[k]))
+                    current.setdefault(group, {})[agent] = [o[k] for o in steps.obs]
+        self._ends = {}
+        for agent, group, slot in closing:
+            mates = [status for other, status in statuses.get(group, {}).items() if other != agent] if group > 0 else []
+            self._mates.setdefault(slot, []).append(mates)
+            mates_now = [obs for other, obs in current.get(group, {}).items() if other != agent] if group > 0 else []
+            self._ends[agent] = (mates_now, all(status[3] for status in mates))
+        ids = np.asarray(ts.agent_id, dtype=np.int64)
+        known = self._lookup(ids)[1] if len(ts) else np.zeros(0, dtype=bool)
+        before = len(self.episodes.group_rewards)
+        self.on_terminal(ts, emit)  # appends one group reward sum per known terminal agent, in order
+        for agent, group_reward in zip(ids[known].tolist(), self.episodes.group_rewards[before:]):
+            if self._ends.get(agent, ([], True))[1]:
+                self.episodes.group_returns.append(group_reward)
+        return self.on_decision(ds, emit)
+
+    def _emit(self, slot: int, agent_id: int, next_obs: list[np.ndarray], done: bool,
+              interrupted: bool) -> Trajectory:
+        n = int(self.length[slot])
+        rows = self._mates.pop(slot, [])[:n]
+        traj = super()._emit(slot, agent_id, next_obs, done, interrupted)
+        mates_now, all_done = self._ends.get(agent_id, ([], True))
+        width = max([len(r) for r in rows] + [len(mates_now), 0])
+        a = self.spec.action_spec
+        shapes = [tuple(o.shape) for o in self.spec.observation_specs]
+        obs = [np.zeros((n, width, *shape), np.float32) for shape in shapes]
+        cont = np.zeros((n, width, a.continuous_size), np.float32)
+        disc = np.zeros((n, width, a.discrete_size), np.int32)
+        present = np.zeros((n, width), bool)
+        rewards = np.zeros((n, width), np.float32)
+        for t, mates in enumerate(rows):
+            for m, (mate_obs, mate_cont, mate_disc, _, mate_reward) in enumerate(mates):
+                for i, o in enumerate(mate_obs):
+                    obs[i][t, m] = o
+                cont[t, m], disc[t, m], present[t, m], rewards[t, m] = mate_cont, mate_disc, True, mate_reward
+        next_obs_mates = [np.zeros((width, *shape), np.float32) for shape in shapes]
+        next_present = np.zeros(width, bool)
+        for m, mate in enumerate(mates_now):
+            for i, o in enumerate(mate):
+                next_obs_mates[i][m] = o
+            next_present[m] = True
+        traj.group = GroupColumns(obs, cont, disc, present, rewards, next_obs_mates, next_present, bool(all_done))
+        return traj
+
+    def drop_all(self) -> None:
+        super().drop_all()
+        self._mates.clear()
+        self._ends = {}
 
 
 def concat_masks(ds: DecisionSteps, branches: tuple[int, ...]) -> np.ndarray | None:

@@ -43,7 +43,7 @@ from trainer.distributed import RankLost, Ranks
 from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
 from trainer.errors import ConfigError, ResultsWriteError, UnityCommunicatorStoppedError, UserError
 from trainer.protocol.codec import NON_FINITE_STAT
-from trainer.rollout import AgentTracker, concat_masks
+from trainer.rollout import AgentTracker, GroupTracker, concat_masks
 from trainer.selfplay import TeamController
 from trainer.stop import EXIT_STOPPED, STOP
 
@@ -288,8 +288,8 @@ class RunState:
     def _tracker(self, env_id: int, behavior: str, runner: BehaviorRunner) -> AgentTracker:
         tracker = self.trackers.get((env_id, behavior))
         if tracker is None:
-            tracker = AgentTracker(runner.spec, runner.settings.time_horizon,
-                                   memory_size=runner.trainer.policy.memory_size)
+            kind = GroupTracker if getattr(runner.trainer, "uses_groups", False) else AgentTracker  # POCA
+            tracker = kind(runner.spec, runner.settings.time_horizon, memory_size=runner.trainer.policy.memory_size)
             self.trackers[(env_id, behavior)] = tracker
         return tracker
 
@@ -305,8 +305,7 @@ class RunState:
                 emit = lambda t, r=runner: r.self_play.count_ghost_steps(len(t))  # noqa: E731
             for env_id, decision, terminal, rows in steps:
                 tracker = self._tracker(env_id, behavior, runner)
-                tracker.on_terminal(terminal, emit)
-                slots = tracker.on_decision(decision, emit)
+                slots = tracker.on_step(terminal, decision, emit)
                 if learns:
                     runner.add_episodes(tracker.episodes.rewards)
                 self._episode_stats(runner.brain, tracker)
@@ -327,6 +326,9 @@ class RunState:
             if extrinsic is not None:  # as ML-Agents: what the extrinsic signal paid, group rewards included
                 paid = extrinsic.strength * (rewards + np.asarray(eps.group_rewards, dtype=np.float64))
                 self.reporter.add_many(brain, "Policy/Extrinsic Reward", paid, StatsAggregationMethod.AVERAGE)
+        if eps.group_returns:  # GroupTracker (POCA): agents whose whole group had finished with them
+            self.reporter.add_many(brain, "Environment/Group Cumulative Reward", np.asarray(eps.group_returns, np.float64),
+                                   StatsAggregationMethod.HISTOGRAM)  # as the reference: the mean and a histogram
 
     # ------------------------------------------------------------------ learning
     def learn(self, trajectories: list) -> None:
@@ -403,13 +405,18 @@ class RunState:
                     router.queue(cid, payload)
             self.pending_reset = self.pending_reset or must_reset
 
-    def count_dropped(self, results: list[StepResult]) -> None:
+    def count_dropped(self, results: list[StepResult], trajectories: list) -> None:
         """Agent steps the codec left out for NaN/Inf (trainer/protocol/codec.py), summed into
-        each brain's summaries."""
-        for res in results:
+        each brain's summaries; the episodes whose last step was one of them are ended
+        (``AgentTracker.on_lost_terminal``), their last trajectory appended to ``trajectories``."""
+        for env_id, res in enumerate(results):
             for behavior, dropped in res.dropped.items():
                 self.reporter.add(brain_name_of(behavior)[0], NON_FINITE_STAT, dropped.count,
                                   StatsAggregationMethod.SUM)
+                tracker = self.trackers.get((env_id, behavior)) if len(dropped.ended) else None
+                if tracker is not None:
+                    runner = self.ensure_runner(behavior)
+                    tracker.on_lost_terminal(dropped.ended, lambda t, r=runner: trajectories.append((r, t)))
 
     # ------------------------------------------------------------------ side channels
     def side_channel_in(self, results: list[StepResult]) -> None:
@@ -618,8 +625,8 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
             STOP.check()  # stop signals take effect here, between steps (trainer.stop)
             state.recorder.observe(results)
             state.side_channel_in(results)
-            state.count_dropped(results)
             trajectories: list = []
+            state.count_dropped(results, trajectories)
             actions, decided = state.decide(results)
             if state.finished:
                 state.record(decided, trajectories)

@@ -56,6 +56,7 @@ class Academy:
         n = task.num_agents
         self.episode_ids = np.zeros(n, dtype=np.int64)
         self.pending_reward = np.zeros(n, dtype=np.float32)
+        self.pending_group_reward = np.zeros(n, dtype=np.float32)  # tasks with TaskStep.group_rewards
         self.continuous = np.zeros((n, task.action_spec.continuous_size), dtype=np.float32)
         self.discrete = np.zeros((n, len(task.action_spec.discrete_branches)), dtype=np.int32)
         self.pending_done_infos = EncodedInfos()
@@ -70,6 +71,7 @@ class Academy:
         self.task.reset()
         self.episode_ids[:] = self.episode_counter.take(self.task.num_agents)
         self.pending_reward[:] = 0.0
+        self.pending_group_reward[:] = 0.0
         self.continuous[:] = 0.0
         self.discrete[:] = 0
         self.pending_done_infos = EncodedInfos()
@@ -86,10 +88,12 @@ class Academy:
             decisions = encode_agent_infos(
                 task.observation_specs, [o[rows] for o in observations], self.pending_reward[rows],
                 self.episode_ids[rows], done=False, action_mask=None if mask is None else mask[rows],
-                compressions=task.observation_compressions, group_ids=None if groups is None else groups[rows])
+                compressions=task.observation_compressions, group_ids=None if groups is None else groups[rows],
+                group_rewards=self.pending_group_reward[rows])
             batches.append((key, self.pending_done_by_behavior[i] + decisions))
         self.pending_done_by_behavior = [EncodedInfos() for _ in self.behaviors]
         self.pending_reward[:] = 0.0
+        self.pending_group_reward[:] = 0.0
         return batches
 
     def collect_encoded(self) -> EncodedInfos:
@@ -99,11 +103,12 @@ class Academy:
         decisions = encode_agent_infos(
             task.observation_specs, task.observe(), self.pending_reward, self.episode_ids,
             done=False, action_mask=task.action_mask(), compressions=task.observation_compressions,
-            group_ids=task.group_ids(),
+            group_ids=task.group_ids(), group_rewards=self.pending_group_reward,
         )
         infos = self.pending_done_infos + decisions
         self.pending_done_infos = EncodedInfos()
         self.pending_reward[:] = 0.0
+        self.pending_group_reward[:] = 0.0
         return infos
 
     def collect_infos(self) -> list[agent_info_pb2.AgentInfoProto]:
@@ -168,6 +173,8 @@ class Academy:
             else:
                 self.pending_reward += result.rewards
             self.pending_stats.extend(result.stats)
+            if result.group_rewards is not None:  # AddGroupReward: summed until the next decision
+                self.pending_group_reward += result.group_rewards
             done = result.done if restarted is None else result.done & ~restarted
             if done.any():
                 self._end_episodes(done, result.interrupted)
@@ -183,6 +190,7 @@ class Academy:
                 task.observation_specs, observations, self.pending_reward[done], self.episode_ids[done],
                 done=True, interrupted=interrupted[done], compressions=task.observation_compressions,
                 group_ids=None if groups is None else groups[done],
+                group_rewards=self.pending_group_reward[done],
             )
         else:
             self._queue_done_by_behavior(done, interrupted)
@@ -191,6 +199,7 @@ class Academy:
         if self.completed_episodes // 100 != (self.completed_episodes - finished) // 100:
             logger.info("%d episodes completed", self.completed_episodes)
         self.pending_reward[done] = 0.0
+        self.pending_group_reward[done] = 0.0
         task.reset(done)
         self.episode_ids[done] = self.episode_counter.take(finished)
         self.continuous[done] = 0.0
@@ -208,7 +217,8 @@ class Academy:
                 self.pending_done_by_behavior[i] += encode_agent_infos(
                     task.observation_specs, [o[mine] for o in observations], self.pending_reward[mine],
                     self.episode_ids[mine], done=True, interrupted=interrupted[mine],
-                    compressions=task.observation_compressions, group_ids=None if groups is None else groups[mine])
+                    compressions=task.observation_compressions, group_ids=None if groups is None else groups[mine],
+                    group_rewards=self.pending_group_reward[mine])
 
 
 def _action_rows(rows: list, width: int, kind: str, dtype) -> np.ndarray:

@@ -25,6 +25,7 @@ from protos.types import ActionSpec, ObservationSpec
 _REWARD, _ID = wire.tag(7, wire.I32), wire.tag(10, wire.VARINT)
 _DONE_TRUE, _MAX_STEP_TRUE = wire.tag(8, wire.VARINT) + b"\x01", wire.tag(9, wire.VARINT) + b"\x01"
 _GROUP_ID = wire.tag(14, wire.VARINT)
+_GROUP_REWARD = wire.tag(15, wire.I32)
 _PNG = 1  # ObservationProto.compression_type
 
 
@@ -64,6 +65,7 @@ def encode_agent_infos(
     action_mask: np.ndarray | None = None,
     compressions: Sequence[str] | None = None,
     group_ids: np.ndarray | None = None,
+    group_rewards: np.ndarray | None = None,
 ) -> EncodedInfos:
     """AgentInfoProtos as Unity's ``PutObservations`` fills them, serialized as Unity's C#
     protobuf writes them: fields in number order, the proto3 defaults left out (a zero reward,
@@ -78,7 +80,7 @@ def encode_agent_infos(
     ``compressions`` (per observation, "none" or "png") and ``group_ids`` (int [count], 0 = no
     group) are what the ``mirror`` task needs: PNG cameras and agent groups (AgentInfoProto
     field 14). Records with them are joined one by one (``_encode_few``): a PNG's length differs
-    from agent to agent.
+    from agent to agent. ``group_rewards`` (float [count]) is field 15, left out where zero.
     """
     count = len(episode_ids)
     if count == 0:
@@ -90,9 +92,11 @@ def encode_agent_infos(
     masks = (np.asarray(action_mask, dtype=bool).reshape(count, -1).astype(np.uint8)
              if action_mask is not None else None)
     pngs = tuple(c == "png" for c in compressions) if compressions is not None and "png" in compressions else None
-    if count < wire.MIN_MATRIX_ROWS or pngs is not None or group_ids is not None:
+    if group_rewards is not None and not np.any(group_rewards):
+        group_rewards = None
+    if count < wire.MIN_MATRIX_ROWS or pngs is not None or group_ids is not None or group_rewards is not None:
         return _encode_few(observation_specs, observations, rewards, ids, done, max_step, masks, pngs,
-                           group_ids)
+                           group_ids, group_rewards)
     parts: list = []
     keep: list = []  # per part: None (every record has it), bool [count] or bool [count, width]
 
@@ -142,7 +146,7 @@ def encode_agent_infos(
 
 
 def _encode_few(observation_specs, observations, rewards, ids, done, max_step, masks, pngs=None,
-                group_ids=None) -> EncodedInfos:
+                group_ids=None, group_rewards=None) -> EncodedInfos:
     """``encode_agent_infos`` for a handful of agents (or with PNG cameras or groups): each
     record's bytes joined in a loop."""
     pngs = pngs or (False,) * len(observation_specs)
@@ -153,6 +157,8 @@ def _encode_few(observation_specs, observations, rewards, ids, done, max_step, m
     mask_prefix = wire.len_prefix(11, masks.shape[1]) if masks is not None and masks.shape[1] else None
     flags = max_step.tolist() if max_step is not None else [False] * len(ids)
     groups = [0] * len(ids) if group_ids is None else np.asarray(group_ids, dtype=np.int64).tolist()
+    group_rewards = (np.zeros(len(ids), dtype="<f4") if group_rewards is None
+                     else np.ascontiguousarray(np.asarray(group_rewards, dtype="<f4").reshape(len(ids))))
     records = []
     for row, (reward, episode_id, interrupted) in enumerate(zip(rewards.tolist(), ids.tolist(), flags)):
         parts = [_REWARD, rewards[row].tobytes()] if reward != 0 else []
@@ -168,6 +174,8 @@ def _encode_few(observation_specs, observations, rewards, ids, done, max_step, m
             parts += [obs[row]] if frame is None else [frame[0], obs[row].tobytes(), frame[1]]
         if groups[row]:
             parts += [_GROUP_ID, wire.varint(groups[row])]
+        if group_rewards[row] != 0:
+            parts += [_GROUP_REWARD, group_rewards[row].tobytes()]
         records.append(wire.field(1, b"".join(parts)))
     return EncodedInfos(b"".join(records), len(ids))
 

@@ -85,9 +85,15 @@ def test_impossible_values(tmp_path, block, path, fragment):
     assert fragment in message
 
 
-def test_poca_is_refused_clearly(tmp_path):
-    message = error_for(tmp_path, "behaviors:\n  A: {trainer_type: poca}\n")
-    assert "behaviors.A.trainer_type" in message and "ppo and sac only" in message
+def test_poca_is_accepted_with_its_own_hyperparameters(tmp_path):
+    from trainer.config.settings import POCASettings
+
+    path = tmp_path / "poca.yaml"
+    path.write_text("behaviors:\n  A: {trainer_type: poca, hyperparameters: {lambd: 0.9}}\n")
+    settings = load_run_options(str(path)).behaviors["A"]
+    assert settings.trainer_type == "poca" and settings.hyperparameters == POCASettings(lambd=0.9)
+    message = error_for(tmp_path, "behaviors:\n  A: {trainer_type: poca, hyperparameters: {shared_critic: true}}\n")
+    assert "Unknown key 'behaviors.A.hyperparameters.shared_critic'" in message
 
 
 def test_sac_keys_are_checked(tmp_path):

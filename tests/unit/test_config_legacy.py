@@ -94,8 +94,7 @@ def test_legacy_without_trainer_is_an_error(tmp_path):
 def test_legacy_values_go_through_strict_checks(tmp_path):
     with pytest.raises(ConfigError, match="behaviors.A.hyperparameters.lambd"):
         load_text(tmp_path, "A: {trainer: ppo, lambd: 2.0}\n")
-    with pytest.raises(ConfigError, match="ppo and sac only"):
-        load_text(tmp_path, "A: {trainer: poca}\n")
+    assert load_text(tmp_path, "A: {trainer: poca}\n").behaviors["A"].trainer_type == "poca"
 
 
 def test_legacy_sac_keys_go_to_sac_hyperparameters(tmp_path):

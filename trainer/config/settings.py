@@ -23,7 +23,7 @@ ENCODER_TYPES = ("simple", "nature_cnn", "resnet", "match3", "fully_connected")
 ENCODER_MIN_SIZE = {"simple": 20, "nature_cnn": 36, "resnet": 15, "match3": 5, "fully_connected": 1}
 CONDITIONING_TYPES = ("hyper", "none")
 TRAINER_TYPES = ("ppo", "sac", "poca")
-TRAINABLE_TRAINER_TYPES = ("ppo", "sac")
+TRAINABLE_TRAINER_TYPES = ("ppo", "sac", "poca")
 DEFAULT_CHECKPOINT_NAME = "checkpoint.pt"
 
 
@@ -64,8 +64,25 @@ class SACSettings:
             object.__setattr__(self, "reward_signal_steps_per_update", float(self.steps_per_update))
 
 
-#: trainer_type -> its hyperparameters class (poca is refused before its block is read)
-HYPERPARAMETER_CLASSES: dict[str, type] = {"ppo": PPOSettings, "sac": SACSettings}
+@dataclass(frozen=True)
+class POCASettings:
+    """``trainer_type: poca`` hyperparameters: PPO's without shared_critic, and (as in ML-Agents)
+    beta/epsilon schedules do not follow learning_rate_schedule (docs/poca.md)."""
+
+    batch_size: int = 1024
+    buffer_size: int = 10240
+    learning_rate: float = 3.0e-4
+    beta: float = 5.0e-3
+    epsilon: float = 0.2
+    lambd: float = 0.95
+    num_epoch: int = 3
+    learning_rate_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
+    beta_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
+    epsilon_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
+
+
+#: trainer_type -> its hyperparameters class
+HYPERPARAMETER_CLASSES: dict[str, type] = {"ppo": PPOSettings, "sac": SACSettings, "poca": POCASettings}
 
 
 @dataclass(frozen=True)

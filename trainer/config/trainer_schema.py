@@ -33,14 +33,15 @@ logger = logging.getLogger("mlagents_like")
 
 
 def check_trainer_type(value: Any, path: str) -> str:
-    """PPO and SAC are trainable; poca is known but refused; anything else is unknown."""
+    """Every trainer type of TRAINABLE_TRAINER_TYPES trains; a known one not listed there is
+    refused; anything else is unknown."""
     trainer_type = to_str(value, path)
     if trainer_type in TRAINABLE_TRAINER_TYPES:
         return trainer_type
     if trainer_type in TRAINER_TYPES:
         raise ConfigError(
-            f"'{path}' is '{trainer_type}': mlagents-like trains {' and '.join(TRAINABLE_TRAINER_TYPES)} "
-            f"only for now. Set 'trainer_type: ppo' (or sac)."
+            f"'{path}' is '{trainer_type}': mlagents-like trains {', '.join(TRAINABLE_TRAINER_TYPES)} "
+            f"only for now. Set 'trainer_type: ppo'."
         )
     raise ConfigError(
         f"'{path}': unknown trainer type '{trainer_type}'.{suggestion(trainer_type, TRAINER_TYPES)} "

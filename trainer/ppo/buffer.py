@@ -26,10 +26,31 @@ class Trajectory:
     interrupted: bool  # the episode ended by max_step_reached: bootstrap anyway
     episode: Any = None  # identifies the agent's episode across its trajectories (per-episode sums)
     memories: np.ndarray | None = None  # float32 [T, memory_size]: each action's input memory (LSTM)
+    group: "GroupColumns | None" = None  # the agent's teammates (rollout.GroupTracker; POCA), else None
 
     def __len__(self) -> int:
         return int(self.rewards.shape[0])
 
+
+@dataclass
+class GroupColumns:
+    """What an agent's teammates did beside each of its T steps, M teammate slots (padding where
+    ``present`` is False): the same step's observation, action and individual reward of each
+    teammate, and at the end the teammates' observations after the last step and whether all of
+    them were done then."""
+
+    obs: list[np.ndarray]  # per observation, float32 [T, M, *shape]
+    continuous_actions: np.ndarray  # float32 [T, M, c]
+    discrete_actions: np.ndarray  # int [T, M, b]
+    present: np.ndarray  # bool [T, M]
+    rewards: np.ndarray  # float32 [T, M]: each teammate's own reward for that step (0 where absent)
+    next_obs: list[np.ndarray]  # per observation, float32 [M2, *shape]: the teammates after the last step
+    next_present: np.ndarray  # bool [M2]
+    all_done: bool  # every teammate's episode had ended at the last step (True without teammates)
+
+    @property
+    def width(self) -> int:
+        return int(self.present.shape[1])
 
 class UpdateBuffer:
     """Experiences waiting for the next PPO update: field name -> list of [T, ...] arrays."""
@@ -51,6 +72,17 @@ class UpdateBuffer:
         for name, array in fields.items():
             self._fields.setdefault(name, []).append(array)
         self._length += next(iter(lengths.values()), 0)
+
+    def rewrite(self, name: str, fn) -> None:
+        """Replace every buffered array of field ``name`` by ``fn(array)`` (same leading length;
+        POCA pads its teammate columns when a wider group arrives)."""
+        arrays = self._fields.get(name)
+        if arrays is not None:
+            arrays[:] = [fn(array) for array in arrays]
+
+    @property
+    def field_names(self) -> list[str]:
+        return list(self._fields)
 
     def concatenated(self) -> dict[str, np.ndarray]:
         """All buffered experiences, field name -> array [len(self), ...]."""

@@ -64,10 +64,7 @@ class PPOTrainer:
         self.policy = Policy(behavior_spec, hyperparams, seed, device)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed + 2)
-            self.critic = Critic(
-                behavior_spec.observation_specs, list(hyperparams.reward_signals), hyperparams,
-                shared_body=self.policy.actor.network_body if hyperparams.shared_critic else None,
-            ).to(self.device)
+            self.critic = self._make_critic().to(self.device)
         trainable = [
             p for p in chain(self.policy.actor.parameters(), self.critic.parameters()) if p.requires_grad
         ]
@@ -89,9 +86,16 @@ class PPOTrainer:
         self.numpy_update = use_numpy_update
         # value estimates of vector-observation critics in numpy: no per-trajectory torch op overhead
         self._numpy_critic = NumpyCritic(self.critic) if (
-            numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
+            isinstance(self.critic, Critic) and numpy_net.supports(self.critic, recurrent=True)
+            and self.device.type == "cpu") else None
         self._numpy_ppo: numpy_update.NumpyPPO | None = None  # built at the first numpy update
         self._rows: int | None = None  # ``update``'s rows
+
+    def _make_critic(self) -> torch.nn.Module:
+        """PPO's critic (a POCA trainer builds its centralised one instead)."""
+        h = self.hyperparams
+        return Critic(self.behavior_spec.observation_specs, list(h.reward_signals), h,
+                      shared_body=self.policy.actor.network_body if h.shared_critic else None)
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays: list[np.ndarray]) -> list[torch.Tensor]:
@@ -158,28 +162,13 @@ class PPOTrainer:
             values, next_values = self._value_estimates(traj)
         terminal = traj.done and not traj.interrupted
         fields: dict[str, np.ndarray] = {_obs_key(i): np.asarray(o, np.float32) for i, o in enumerate(traj.obs)}
-        experience = None
-        if self.providers:
-            next_obs = None
-            if self._needs_next_obs:  # what each step led to: the following step's obs, then next_obs
-                next_obs = [np.concatenate([o[1:], n[None]], axis=0).astype(np.float32)
-                            for o, n in zip(traj.obs, traj.next_obs)]
-                fields.update({_next_obs_key(i): o for i, o in enumerate(next_obs)})
-            experience = Experience(traj.obs, next_obs, traj.continuous_actions, traj.discrete_actions)
+        experience = self._provider_experience(traj, fields)
         advantages = []
         stats: dict[str, float] = {}
         for name, (gamma, strength) in self.hyperparams.reward_signals.items():
             provider = self.providers.get(name)
-            if provider is None:
-                rewards = np.asarray(traj.rewards, dtype=np.float32) * np.float32(strength)
-                bootstrap = 0.0 if terminal else next_values[name]
-            else:
-                rewards = provider.evaluate(experience) * np.float32(strength)
-                bootstrap = next_values[name] if provider.ignore_done or not terminal else 0.0
-                sums = self._episode_intrinsic.setdefault(traj.episode, {})
-                sums[name] = sums.get(name, 0.0) + float(np.sum(rewards))
-                if traj.done:
-                    stats[f"Policy/{provider.stat_name} Reward"] = sums[name]
+            rewards, bootstrap = self._signal_rewards(name, strength, traj, experience, terminal, next_values[name],
+                                                      stats)
             advantage, returns = gae(rewards, values[name], bootstrap, gamma, self.hyperparams.lambd)
             advantages.append(advantage)
             fields[f"values:{name}"] = values[name]
@@ -190,14 +179,7 @@ class PPOTrainer:
             self._episode_intrinsic.pop(traj.episode, None)
         fields["advantages"] = (advantages[0] if len(advantages) == 1  # the mean of one row is that row
                                 else np.mean(np.stack(advantages), axis=0)).astype(np.float32)
-        fields["continuous_actions"] = np.asarray(traj.continuous_actions, np.float32).reshape(length, -1)
-        fields["discrete_actions"] = np.asarray(traj.discrete_actions, np.int64).reshape(length, -1)
-        fields["log_probs"] = np.asarray(traj.log_probs, np.float32).reshape(length, -1)
-        mask_width = sum(self.behavior_spec.action_spec.discrete_branches)
-        fields["action_masks"] = (
-            np.zeros((length, mask_width), dtype=bool) if traj.action_masks is None
-            else np.asarray(traj.action_masks, dtype=bool)
-        )
+        self._add_action_fields(traj, fields)
         if self.hyperparams.memory_size:
             fields["memory"] = np.asarray(traj.memories, np.float32)
             fields["critic_memory"] = critic_memories
@@ -208,6 +190,45 @@ class PPOTrainer:
         self.buffer.append(fields)
         self.step += length
         return stats
+
+    def _add_action_fields(self, traj: Trajectory, fields: dict[str, np.ndarray]) -> None:
+        """The actions, their log-probabilities and the action masks of a trajectory's steps."""
+        length = len(traj)
+        fields["continuous_actions"] = np.asarray(traj.continuous_actions, np.float32).reshape(length, -1)
+        fields["discrete_actions"] = np.asarray(traj.discrete_actions, np.int64).reshape(length, -1)
+        fields["log_probs"] = np.asarray(traj.log_probs, np.float32).reshape(length, -1)
+        mask_width = sum(self.behavior_spec.action_spec.discrete_branches)
+        fields["action_masks"] = (
+            np.zeros((length, mask_width), dtype=bool) if traj.action_masks is None
+            else np.asarray(traj.action_masks, dtype=bool)
+        )
+
+    def _provider_experience(self, traj: Trajectory, fields: dict[str, np.ndarray]) -> Experience | None:
+        """What curiosity / rnd read of a trajectory (None without them); adds the next
+        observations to ``fields`` when one of them needs them."""
+        if not self.providers:
+            return None
+        next_obs = None
+        if self._needs_next_obs:  # what each step led to: the following step's obs, then next_obs
+            next_obs = [np.concatenate([o[1:], n[None]], axis=0).astype(np.float32)
+                        for o, n in zip(traj.obs, traj.next_obs)]
+            fields.update({_next_obs_key(i): o for i, o in enumerate(next_obs)})
+        return Experience(traj.obs, next_obs, traj.continuous_actions, traj.discrete_actions)
+
+    def _signal_rewards(self, name: str, strength: float, traj: Trajectory, experience: Experience | None,
+                        terminal: bool, next_value: float, stats: dict[str, float]) -> tuple[np.ndarray, float]:
+        """(rewards float32 [T] of reward signal ``name`` times its strength, the value its returns
+        bootstrap from: 0 after a true terminal, except for a signal that ignores it). Intrinsic
+        signals also sum their rewards per episode into ``stats`` when the episode ends."""
+        provider = self.providers.get(name)
+        if provider is None:
+            return np.asarray(traj.rewards, dtype=np.float32) * np.float32(strength), 0.0 if terminal else next_value
+        rewards = provider.evaluate(experience) * np.float32(strength)
+        sums = self._episode_intrinsic.setdefault(traj.episode, {})
+        sums[name] = sums.get(name, 0.0) + float(np.sum(rewards))
+        if traj.done:
+            stats[f"Policy/{provider.stat_name} Reward"] = sums[name]
+        return rewards, next_value if provider.ignore_done or not terminal else 0.0
 
     def forget_episodes(self) -> None:
         """After a RESET or a simulator restart the unfinished episodes never continue: drop what

@@ -14,6 +14,7 @@ from unity_stub_env.tasks.basic import BasicTask
 from unity_stub_env.tasks.creature import CreatureTask
 from unity_stub_env.tasks.dodge import DodgeTask
 from unity_stub_env.tasks.mimic import MimicTask
+from unity_stub_env.tasks.pushblock import PushBlockTask
 from unity_stub_env.tasks.runner import RunnerTask
 from unity_stub_env.tasks.soccer import SoccerTask
 
@@ -25,6 +26,7 @@ TASKS: dict[str, type[Task]] = {
     MimicTask.name: MimicTask,
     RunnerTask.name: RunnerTask,
     SoccerTask.name: SoccerTask,
+    PushBlockTask.name: PushBlockTask,
 }
 
 
@@ -37,4 +39,4 @@ def make_task(name: str, num_areas: int = 1, seed: int = 0,
 
 
 __all__ = ["TASKS", "make_task", "Task", "TaskStep", "EnvironmentParameters", "BasicTask", "Ball3DTask", "DodgeTask", "CreatureTask",
-           "MimicTask", "RunnerTask", "SoccerTask"]
+           "MimicTask", "RunnerTask", "SoccerTask", "PushBlockTask"]

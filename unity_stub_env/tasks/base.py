@@ -29,13 +29,16 @@ class TaskStep:
     """The outcome of one control step for all n agents.
 
     rewards: float32 [n] reward earned in this step; done: bool [n] episode ended;
-    interrupted: bool [n] ended by max_step (only meaningful where done); stats: custom stats.
+    interrupted: bool [n] ended by max_step (only meaningful where done); stats: custom stats;
+    group_rewards: float32 [n] each agent's group's reward in this step (Unity's
+    SimpleMultiAgentGroup.AddGroupReward), or None for tasks without groups.
     """
 
     rewards: np.ndarray
     done: np.ndarray
     interrupted: np.ndarray
     stats: list[Stat] = field(default_factory=list)
+    group_rewards: np.ndarray | None = None
 
 
 class EnvironmentParameters:

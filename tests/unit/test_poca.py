@@ -1,0 +1,207 @@
+"""MA-POCA's pure pieces: the attention critic (order of teammates, absent slots), group trajectory
+assembly (teammates' columns, the group's end, an agent that leaves early) and the lambda returns,
+baselines and bootstraps against hand-computed values (docs/poca.md)."""
+import numpy as np
+import pytest
+import torch
+
+from protos.types import (
+    ActionSpec, BehaviorSpec, DecisionSteps, DimensionProperty, ObservationSpec, ObservationType, TerminalSteps,
+)
+from trainer.poca.networks import POCACritic
+from trainer.poca.trainer import POCATrainer
+from trainer.ppo.buffer import GroupColumns, Trajectory
+from trainer.ppo.gae import gae
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.rollout import GroupTracker
+
+SPEC = BehaviorSpec(
+    (ObservationSpec((2,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "vec"),),
+    ActionSpec(1, (3,)),
+)
+
+
+def critic():
+    torch.manual_seed(0)
+    return POCACritic(SPEC.observation_specs, SPEC.action_spec, ["extrinsic"],
+                      PPOHyperparams(hidden_units=16, num_layers=2, normalize=True))
+
+
+# ------------------------------------------------------------------------------ critic
+def test_value_ignores_the_order_of_members_and_whatever_sits_in_absent_slots():
+    net = critic()
+    obs = torch.randn(6, 4, 2)
+    present = torch.tensor([[True, True, True, False]] * 3 + [[True, False, True, False]] * 3)
+    value = net.value([obs], present)["extrinsic"]
+    shuffled = obs[:, [2, 1, 0, 3]]
+    shuffled_present = present[:, [2, 1, 0, 3]]
+    assert torch.allclose(net.value([shuffled], shuffled_present)["extrinsic"], value, atol=1e-6)
+    garbage = obs.clone()
+    garbage[~present] = 1e6
+    assert torch.allclose(net.value([garbage], present)["extrinsic"], value, atol=1e-6)
+    # ...but a present member's observation does matter
+    moved = obs.clone()
+    moved[:, 2] += 1.0
+    assert not torch.allclose(net.value([moved], present)["extrinsic"], value, atol=1e-4)
+
+
+def test_baseline_ignores_teammate_order_and_padding_and_sees_teammates_actions():
+    net = critic()
+    own, mates = torch.randn(5, 2), torch.randn(5, 3, 2)
+    cont, disc = torch.randn(5, 3, 1), torch.randint(0, 3, (5, 3, 1))
+    present = torch.tensor([[True, True, False]] * 5)
+    base = net.baseline([own], [mates], cont, disc, present)["extrinsic"]
+    order = [1, 0, 2]
+    assert torch.allclose(net.baseline([own], [mates[:, order]], cont[:, order], disc[:, order], present[:, order])
+                          ["extrinsic"], base, atol=1e-6)
+    padded = net.baseline([own], [torch.cat([mates, torch.randn(5, 2, 2)], 1)], torch.cat([cont, torch.randn(5, 2, 1)], 1),
+                          torch.cat([disc, torch.randint(0, 3, (5, 2, 1))], 1),
+                          torch.cat([present, torch.zeros(5, 2, dtype=torch.bool)], 1))["extrinsic"]
+    assert torch.allclose(padded, base, atol=1e-6)
+    other = disc.clone()
+    other[:, 0, 0] = (other[:, 0, 0] + 1) % 3
+    assert not torch.allclose(net.baseline([own], [mates], cont, other, present)["extrinsic"], base, atol=1e-5)
+    alone = net.baseline([own], [mates[:, :0]], cont[:, :0], disc[:, :0], present[:, :0])["extrinsic"]
+    assert alone.shape == (5,) and torch.isfinite(alone).all()
+
+
+# ------------------------------------------------------------------------------ assembly
+def ds(ids, obs, groups, group_reward=0.0, reward=None):
+    n = len(ids)
+    reward = np.zeros(n, np.float32) if reward is None else np.array(reward, np.float32)
+    return DecisionSteps(obs=[np.array(obs, np.float32).reshape(n, 2)], reward=reward,
+                         agent_id=np.array(ids, np.int64), action_mask=None, group_id=np.array(groups, np.int32),
+                         group_reward=np.full(n, group_reward, np.float32))
+
+
+def ts(ids, obs, groups, group_reward=0.0, interrupted=False):
+    n = len(ids)
+    return TerminalSteps(obs=[np.array(obs, np.float32).reshape(n, 2)], reward=np.zeros(n, np.float32),
+                         interrupted=np.full(n, interrupted), agent_id=np.array(ids, np.int64),
+                         group_id=np.array(groups, np.int32), group_reward=np.full(n, group_reward, np.float32))
+
+
+NONE = ts([], [], [])
+
+
+def act(tracker, slots, choices):
+    n = len(slots)
+    tracker.on_actions(slots, np.array(choices, np.float32).reshape(n, 1) / 10, np.array(choices, np.int32).reshape(n, 1),
+                       np.zeros((n, 2), np.float32), None)
+
+
+def test_teammates_columns_and_an_agent_that_leaves_before_its_group():
+    out = []
+    tr = GroupTracker(SPEC, time_horizon=10)
+    # step 0: agents 1 and 2 of group 7 decide; agent 3 has no group
+    act(tr, tr.on_step(NONE, ds([1, 2, 3], [[1, 0], [2, 0], [3, 0]], [7, 7, 0]), out.append), [1, 2, 0])
+    # step 1: all continue (group reward 0.5; agent 2's own reward 0.3)
+    act(tr, tr.on_step(NONE, ds([1, 2, 3], [[1, 1], [2, 1], [3, 1]], [7, 7, 0], 0.5, [0, 0.3, 0]), out.append),
+        [0, 1, 2])
+    # step 2: agent 2 leaves (its episode ends, group 7 goes on with agent 1)
+    act(tr, tr.on_step(ts([2], [[2, 2]], [7], 0.25), ds([1, 3], [[1, 2], [3, 2]], [7, 0], 0.25), out.append), [2, 1])
+    assert len(out) == 1
+    left = out.pop()
+    assert left.done and not left.interrupted and len(left) == 2
+    g = left.group
+    # at each of its steps its teammate was agent 1, with the observation and action of that step
+    np.testing.assert_array_equal(g.present, [[True], [True]])
+    np.testing.assert_array_equal(g.obs[0][:, 0], [[1, 0], [1, 1]])
+    np.testing.assert_array_equal(g.discrete_actions[:, 0, 0], [1, 0])
+    np.testing.assert_allclose(g.continuous_actions[:, 0, 0], [0.1, 0.0])
+    # the group goes on without it: bootstrap from agent 1's observation now
+    assert not g.all_done
+    np.testing.assert_array_equal(g.next_obs[0], [[1, 2]])
+    assert tr.episodes.group_returns == []  # its group had not finished
+    # step 3: the group ends (agent 1 alone), agent 3 (no group) is cut by its own end too
+    tr.on_step(ts([1, 3], [[1, 3], [3, 3]], [7, 0], 1.0), ds([], [], []), out.append)
+    last, lonely = out
+    assert last.done and last.group.all_done and len(last) == 3
+    # agent 2 was its teammate for steps 0 and 1 only (it acted at step 1, then it was gone)
+    np.testing.assert_array_equal(last.group.present, [[True], [True], [False]])
+    np.testing.assert_array_equal(last.group.obs[0][:, 0], [[2, 0], [2, 1], [0, 0]])
+    np.testing.assert_allclose(last.group.rewards[:, 0], [0.3, 0, 0])  # agent 2's own rewards
+    np.testing.assert_allclose(left.group.rewards[:, 0], [0, 0])
+    assert lonely.group.width == 0 and lonely.group.all_done
+    # group rewards 0.5 + 0.25 + 1.0 of agent 1 (the only one there when its group finished); agent 3
+    # without a group counts as a finished group of its own, as in the reference
+    assert tr.episodes.group_returns == [pytest.approx(1.75)] * 2
+    np.testing.assert_allclose(last.rewards, [0.5, 0.25, 1.0])
+
+
+# ------------------------------------------------------------------------------ returns
+def test_lambda_returns_are_gae_returns_by_hand():
+    # G_t = r_t + gamma ((1 - lambda) V_{t+1} + lambda G_{t+1}), G_T = V_next; gamma 0.9, lambda 0.8
+    _, returns = gae(np.array([1.0, 0.0, 2.0]), np.array([0.5, 1.0, 1.5]), 2.0, 0.9, 0.8)
+    g2 = 2 + 0.9 * 2
+    g1 = 0 + 0.9 * (0.2 * 1.5 + 0.8 * g2)
+    g0 = 1 + 0.9 * (0.2 * 1.0 + 0.8 * g1)
+    np.testing.assert_allclose(returns, [g0, g1, g2], rtol=1e-6)
+    assert g0 == pytest.approx(3.34432)
+
+
+def trajectory(done, interrupted, all_done):
+    n = 3
+    group = GroupColumns([np.zeros((n, 1, 2), np.float32)], np.zeros((n, 1, 1), np.float32), np.zeros((n, 1, 1), np.int32),
+                         np.ones((n, 1), bool), np.array([[0.5], [0.0], [0.0]], np.float32),
+                         [np.zeros((1, 2), np.float32)], np.ones(1, bool), all_done)
+    return Trajectory(obs=[np.zeros((n, 2), np.float32)], next_obs=[np.zeros(2, np.float32)],
+                      rewards=np.array([1.0, 0.0, 2.0], np.float32), continuous_actions=np.zeros((n, 1), np.float32),
+                      discrete_actions=np.zeros((n, 1), np.int64), log_probs=np.zeros((n, 2), np.float32),
+                      action_masks=None, done=done, interrupted=interrupted, episode="e", group=group)
+
+
+@pytest.mark.parametrize("done, interrupted, all_done, bootstrap", [
+    (False, False, False, 2.0),  # cut at time_horizon
+    (True, False, False, 2.0),  # left before its group: the group's value after it left is its credit
+    (True, True, True, 2.0),  # the group was interrupted (max_step)
+    (True, False, True, 0.0),  # the group's episode is over
+])
+def test_returns_advantages_and_the_group_bootstrap(monkeypatch, done, interrupted, all_done, bootstrap):
+    trainer = POCATrainer("B", SPEC, PPOHyperparams(hidden_units=8, num_layers=1, lambd=0.8,
+                                                    reward_signals={"extrinsic": (0.9, 1.0)}), seed=0)
+    values, baselines = np.array([0.5, 1.0, 1.5], np.float32), np.array([0.25, 0.5, 1.0], np.float32)
+    monkeypatch.setattr(trainer, "estimates", lambda traj, group: (
+        {"extrinsic": values}, {"extrinsic": baselines}, {"extrinsic": 2.0}))
+    trainer.process_trajectory(trajectory(done, interrupted, all_done))
+    fields = trainer.buffer.concatenated()
+    # rewards 1, 0, 2 plus the teammate's own 0.5 at step 0
+    g2 = 2 + 0.9 * bootstrap
+    g1 = 0.9 * (0.2 * 1.5 + 0.8 * g2)
+    g0 = 1.5 + 0.9 * (0.2 * 1.0 + 0.8 * g1)
+    np.testing.assert_allclose(fields["returns:extrinsic"], [g0, g1, g2], rtol=1e-6)
+    np.testing.assert_allclose(fields["advantages"], np.array([g0, g1, g2]) - baselines, rtol=1e-6)
+    assert fields["mates_present"].shape == (3, 1)
+
+
+def test_poca_updates_and_its_checkpoint_round_trips():
+    spec = SPEC
+    hp = PPOHyperparams(hidden_units=8, num_layers=1, batch_size=4, buffer_size=4, num_epoch=2)
+    trainer = POCATrainer("B", spec, hp, seed=0)
+    rng = np.random.default_rng(0)
+    for width in (1, 2):  # a wider group later: the buffered experiences are padded
+        traj = trajectory(False, False, False)
+        traj.group = GroupColumns([rng.normal(size=(3, width, 2)).astype(np.float32)], np.zeros((3, width, 1), np.float32),
+                                  np.zeros((3, width, 1), np.int32), np.ones((3, width), bool),
+                                  np.zeros((3, width), np.float32), [np.zeros((width, 2), np.float32)],
+                                  np.ones(width, bool), False)
+        trainer.process_trajectory(traj)
+    assert trainer.ready_to_update() and trainer.group_width == 2
+    before = [p.detach().clone() for p in trainer.critic.parameters()]
+    stats = trainer.update()
+    assert {"Losses/Baseline Loss", "Losses/Value Loss", "Losses/Policy Loss"} <= set(stats)
+    assert any(not torch.equal(a, b) for a, b in zip(before, trainer.critic.parameters()))
+    again = POCATrainer("B", spec, hp, seed=5)
+    again.load_state_dict(trainer.state_dict())
+    for a, b in zip(again.critic.state_dict().values(), trainer.critic.state_dict().values()):
+        assert torch.equal(a, b)
+
+
+def test_poca_with_memory_is_refused_before_the_run():
+    from trainer.config.settings import MemorySettings, NetworkSettings, POCASettings, TrainerSettings
+    from trainer.config.support import unsupported
+
+    settings = TrainerSettings(trainer_type="poca", hyperparameters=POCASettings(),
+                               network_settings=NetworkSettings(memory=MemorySettings()))
+    assert [key for key, _ in unsupported(settings)] == ["network_settings.memory"]
+    assert unsupported(TrainerSettings(trainer_type="poca", hyperparameters=POCASettings())) == []
