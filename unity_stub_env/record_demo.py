@@ -14,6 +14,11 @@ Policies: ``scripted`` is a hand-written expert (``SCRIPTED``): ``basic`` walks 
 large goal (the optimal return 0.93), ``ball3d`` is a proportional-derivative controller that
 tilts the plate under the ball, ``mimic`` sets the PD targets on the reference clip (the "reference PD"
 of ``--evaluate``). ``--env-param KEY=NUMBER`` sets environment parameters, e.g. mimic's ``motion``.
+``--demo-noise SIGMA`` (continuous actions): the agents act with the policy's action plus Gaussian
+noise of std SIGMA (clipped to [-1, 1]) while the file records the policy's own action, as DART
+(Laskey et al. 2017) does: the demonstration then also shows how the expert recovers from the
+small errors a clone makes (a clone of noise-free mimic demonstrations drifts off the states it
+saw and falls; bench/RESULTS.md, mimic2). Rewards are those of the noisy actions.
 ``MODEL.onnx`` is a model exported by a trainer in the ML-Agents
 ONNX contract, run through onnxruntime with its deterministic outputs (the mean / the argmax).
 """
@@ -142,14 +147,18 @@ def parse_env_params(pairs: list[str] | None) -> EnvironmentParameters:
 
 
 def record(task_name: str, out_path: str, policy: str, steps: int = DEFAULT_STEPS, seed: int = 0,
-           num_areas: int = 1, env_params: list[str] | None = None) -> tuple[int, int, float]:
+           num_areas: int = 1, env_params: list[str] | None = None, noise: float = 0.0) -> tuple[int, int, float]:
     """Write ``out_path``; returns (records, episodes, mean episode return). ``env_params``: KEY=NUMBER
-    environment parameters the task reads (``--env-param``)."""
+    environment parameters the task reads (``--env-param``); ``noise`` (``--demo-noise``): see the
+    module docstring."""
     if steps < 1:
         raise RecordError(f"--demo-steps must be at least 1, got {steps}")
     if not out_path.endswith(".demo"):
         raise RecordError(f"--record-demo {out_path!r}: the file name must end in .demo (trainers read "
                           "only those)")
+    if not noise >= 0:
+        raise RecordError(f"--demo-noise must be 0 or more, got {noise}")
+    rng = np.random.default_rng(seed)
     params = parse_env_params(env_params)
     try:
         task = make_task(task_name, num_areas=num_areas, seed=seed, env_params=params)
@@ -178,6 +187,10 @@ def record(task_name: str, out_path: str, policy: str, steps: int = DEFAULT_STEP
             infos = academy.collect_infos()
             continuous, discrete = act(obs, mask)
             actions = [_action_proto(continuous[i], discrete[i]) for i in range(task.num_agents)]
+            executed = actions
+            if noise > 0 and spec.continuous_size:  # DART: act with noise, record the expert's label
+                noisy = np.clip(continuous + rng.normal(0.0, noise, continuous.shape), -1.0, 1.0)
+                executed = [_action_proto(noisy[i].astype(np.float32), discrete[i]) for i in range(task.num_agents)]
             deciding = [info for info in infos if not info.done]
             for info in infos:
                 if info.done:  # the terminal record closes the episode: the whole episode goes out
@@ -188,18 +201,18 @@ def record(task_name: str, out_path: str, policy: str, steps: int = DEFAULT_STEP
                         break
             for info, action in zip(deciding, actions):
                 episodes.setdefault(info.id, []).append((info, action))
-            academy.apply_actions(actions)
+            academy.apply_actions(executed)
             academy.advance()
         mean = writer.total_reward / writer.episodes if writer.episodes else 0.0
         return writer.steps, writer.episodes, mean
 
 
 def run(task_name: str, out_path: str, policy: str, steps: int | None, seed: int, num_areas: int | None,
-        env_params: list[str] | None = None) -> int:
+        env_params: list[str] | None = None, noise: float = 0.0) -> int:
     """The CLI's --record-demo: one line of result on stdout; exit code 2 for bad arguments."""
     try:
         count, episodes, mean = record(task_name, out_path, policy, steps or DEFAULT_STEPS, seed, num_areas or 1,
-                                       env_params)
+                                       env_params, noise)
     except RecordError as error:
         print(f"unity-stub-env: {error}", file=sys.stderr)
         return 2

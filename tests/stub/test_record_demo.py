@@ -89,6 +89,7 @@ def test_an_onnx_policy_records_its_deterministic_actions(tmp_path):
     (["--task", "mimic", "--record-demo", "x.demo", "--policy", "scripted", "--env-param", "motion"], "KEY=NUMBER"),
     (["--task", "mimic", "--record-demo", "x.demo", "--policy", "scripted", "--env-param", "motion=7"],
      "motion must be 0..3"),
+    (["--task", "mimic", "--record-demo", "x.demo", "--policy", "scripted", "--demo-noise", "-1"], "--demo-noise"),
 ])
 def test_cli_refuses_bad_arguments_with_exit_code_2(tmp_path, args, message):
     done = subprocess.run([sys.executable, "-m", "unity_stub_env.cli", *args], cwd=tmp_path,
@@ -137,3 +138,20 @@ def test_mimic_expert_tracks_the_squat_clip_with_the_reference_pd_pose_reward(tm
     finally:
         record_demo.SCRIPTED["mimic"] = original
     assert zero_mean / 500 < 0.5
+
+
+def test_demo_noise_acts_noisily_but_records_the_experts_clean_actions(tmp_path):
+    from unity_stub_env.tasks.mimic import MimicTask
+
+    path = str(tmp_path / "noisy.demo")
+    steps, episodes, mean = record_demo.record("mimic", path, "scripted", steps=300, env_params=["motion=2"], noise=0.1)
+    assert episodes >= 2 and mean < 100.0  # the noisy ragdolls fall long before the 500 decisions (clean: ~475)
+    task = MimicTask(1, 0)
+    frames, offset = task.ref.frames[2], task.ref.offset[2]
+    for pair in read_demo(path).pairs:
+        if pair.agent_info.done:
+            continue
+        phase = pair.agent_info.observations[0].float_data.data[-1]
+        frame = round(phase * frames)
+        expected = task.absolute_actions(task.ref.joints[offset + (frame + 1) % frames][None].repeat(task.num_agents, 0))[0]
+        np.testing.assert_allclose(list(pair.action_info.continuous_actions), expected, atol=1e-6)
