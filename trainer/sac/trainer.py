@@ -40,7 +40,6 @@ from trainer.sac.policy import SACPolicy
 from trainer.sac.replay_buffer import ReplayBuffer
 
 
-
 class TwinQ(nn.Module):
     """Q1 and Q2 (checkpoint key ``Optimizer:q_network``, as in the reference)."""
 
