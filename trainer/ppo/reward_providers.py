@@ -27,6 +27,7 @@ named alike). Behaviour as in ML-Agents Release 22 (docs/ppo.md §10):
 from __future__ import annotations
 
 import dataclasses
+import logging
 from typing import Any, Sequence
 
 import numpy as np
@@ -39,6 +40,8 @@ from trainer.ppo.layers import KAIMING_NORMAL, Swish, linear_layer
 from trainer.ppo.losses import masked_mean
 from trainer.ppo.networks import NetworkBody
 from protos.types import ActionSpec, BehaviorSpec
+
+logger = logging.getLogger("mlagents_like")
 
 CURIOSITY_HIDDEN = 256  # the inverse and forward models' hidden width (fixed in the reference)
 FORWARD_WEIGHT = 0.2  # loss = LOSS_MULTIPLIER * (0.2 forward + 0.8 inverse)
@@ -408,3 +411,15 @@ def make_providers(spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int) -
                 providers[name] = PROVIDERS[name](spec, hyperparams, strength,
                                                   hyperparams.reward_signal_networks[name])
     return providers
+
+
+def load_providers(providers: dict[str, Any], state: dict) -> None:
+    """Restore each provider from a checkpoint (PPO, POCA and SAC alike); one the checkpoint lacks
+    (a signal added since) starts untrained, with one warning."""
+    for name, provider in providers.items():
+        keys = provider.state_dict().keys()
+        if all(key in state for key in keys):
+            provider.load_state_dict(state)
+        else:
+            logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
+                           name, ", ".join(sorted(k for k in keys if k not in state)))

@@ -23,7 +23,7 @@ from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.losses import masked_mean, policy_loss, ppo_loss, value_loss
 from trainer.ppo.networks import Critic
 from trainer.ppo.policy import Policy
-from trainer.ppo.reward_providers import Experience, make_providers
+from trainer.ppo.reward_providers import Experience, load_providers, make_providers
 from trainer.ppo.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
 from protos.types import BehaviorSpec
 
@@ -460,13 +460,7 @@ class PPOTrainer:
             self.critic.load_state_dict(critic_state)
             self.optimizer.load_state_dict(state["Optimizer:value_optimizer"])
         self.step = int(state["global_step"]["step"])
-        for name, provider in self.providers.items():
-            keys = provider.state_dict().keys()
-            if all(key in state for key in keys):
-                provider.load_state_dict(state)
-            else:
-                logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
-                               name, ", ".join(sorted(k for k in keys if k not in state)))
+        load_providers(self.providers, state)
         if self.behavioral_cloning is not None:
             if "Optimizer:BC" in state:
                 self.behavioral_cloning.load_state_dict(state)

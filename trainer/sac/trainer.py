@@ -17,7 +17,6 @@ experience: after ``buffer_init_steps`` agent steps, one step per ``steps_per_up
 """
 from __future__ import annotations
 
-import logging
 from itertools import chain
 from typing import Any
 
@@ -32,15 +31,13 @@ from trainer.ppo import numpy_net
 from trainer.ppo.adam import Adam
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.networks import Critic, NetworkBody
-from trainer.ppo.reward_providers import Experience, make_providers
+from trainer.ppo.reward_providers import Experience, load_providers, make_providers
 from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
 from trainer.ppo.trainer import PPOTrainer
 from trainer.sac import losses
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.policy import SACPolicy
 from trainer.sac.replay_buffer import ReplayBuffer
-
-logger = logging.getLogger("mlagents_like")
 
 
 class TwinQ(nn.Module):
@@ -437,13 +434,7 @@ class SACTrainer:
         self.reward_signal_update_steps = (
             int(sac["reward_signal_update_steps"]) if sac is not None and "reward_signal_update_steps" in sac
             else int(max(1, self.step / self.hyperparams.reward_signal_steps_per_update)))
-        for name, provider in self.providers.items():
-            keys = provider.state_dict().keys()
-            if all(key in state for key in keys):
-                provider.load_state_dict(state)
-            else:
-                logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
-                               name, ", ".join(sorted(k for k in keys if k not in state)))
+        load_providers(self.providers, state)
         if self.behavioral_cloning is not None and "Optimizer:BC" in state:
             self.behavioral_cloning.load_state_dict(state)
         rng = state.get("RNG")
