@@ -8,7 +8,7 @@
     unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
                    [--evaluate-option KEY=VALUE]
     unity-stub-env --task basic|ball3d|... --record-demo OUT.demo --policy MODEL.onnx|scripted
-                   [--demo-steps N] [--seed S] [--num-areas N]     (see unity_stub_env.record_demo)
+                   [--demo-steps N] [--seed S] [--num-areas N] [--env-param KEY=NUMBER] [--demo-noise S]  (see unity_stub_env.record_demo)
     unity-stub-env hmm train CORPUS -o MODEL [--states N --restarts R --method fast|baum-welch --seed S]
     unity-stub-env hmm sample MODEL -n N --length L [--seed S]      (see unity_stub_env.hmm)
     unity-stub-env creature --kind quadruped|biped|lsystem --seed S [--mjcf OUT.xml]
@@ -84,7 +84,13 @@ def build_parser() -> argparse.ArgumentParser:
                              "--policy, for behavioral_cloning and GAIL")
     parser.add_argument("--policy", default=None, metavar="MODEL.onnx|scripted",
                         help="--record-demo: a trained .onnx (deterministic actions) or 'scripted' (the "
-                             "task's hand-written expert: basic, ball3d)")
+                             "task's hand-written expert: basic, ball3d, mimic)")
+    parser.add_argument("--env-param", dest="env_params", action="append", default=[], metavar="KEY=NUMBER",
+                        help="--record-demo: an environment parameter the task reads, e.g. mimic's motion=2; "
+                             "repeatable")
+    parser.add_argument("--demo-noise", type=float, default=0.0, metavar="SIGMA",
+                        help="--record-demo: act with Gaussian noise of std SIGMA on the continuous actions "
+                             "while recording the policy's own (DART; default 0)")
     parser.add_argument("--demo-steps", type=int, default=None, metavar="N",
                         help="--record-demo: record whole episodes until the file holds N steps (default 1000)")
     parser.add_argument("--write-launcher", metavar="DIR", default=None,
@@ -176,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
         from unity_stub_env.record_demo import run as run_recording
 
         return run_recording(args.tasks[0], args.record_demo, args.policy, args.demo_steps, args.seed or 0,
-                             args.num_areas)
+                             args.num_areas, args.env_params, args.demo_noise)
     if args.write_launcher is not None:
         spec = ["--spec", os.path.abspath(args.spec)] if args.mirror is not None else []
         path = write_player_launcher(args.write_launcher, args.tasks, extra_args=spin_wait_args(

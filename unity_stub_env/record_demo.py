@@ -12,7 +12,14 @@ closes its episode. Recording stops after the first whole episode that brings th
 
 Policies: ``scripted`` is a hand-written expert (``SCRIPTED``): ``basic`` walks right to the
 large goal (the optimal return 0.93), ``ball3d`` is a proportional-derivative controller that
-tilts the plate under the ball. ``MODEL.onnx`` is a model exported by a trainer in the ML-Agents
+tilts the plate under the ball, ``mimic`` sets the PD targets on the reference clip (the "reference PD"
+of ``--evaluate``). ``--env-param KEY=NUMBER`` sets environment parameters, e.g. mimic's ``motion``.
+``--demo-noise SIGMA`` (continuous actions): the agents act with the policy's action plus Gaussian
+noise of std SIGMA (clipped to [-1, 1]) while the file records the policy's own action, as DART
+(Laskey et al. 2017) does: the demonstration then also shows how the expert recovers from the
+small errors a clone makes (a clone of noise-free mimic demonstrations drifts off the states it
+saw and falls; bench/RESULTS.md, mimic2). Rewards are those of the noisy actions.
+``MODEL.onnx`` is a model exported by a trainer in the ML-Agents
 ONNX contract, run through onnxruntime with its deterministic outputs (the mean / the argmax).
 """
 from __future__ import annotations
@@ -28,7 +35,7 @@ from protos.communicator_objects.agent_action_pb2 import AgentActionProto
 from protos.demo_file import DemoWriter
 from unity_stub_env.academy import Academy
 from unity_stub_env.agents import build_brain_parameters
-from unity_stub_env.tasks import make_task
+from unity_stub_env.tasks import EnvironmentParameters, make_task
 from unity_stub_env.tasks.ball3d import TILT_RATE
 from unity_stub_env.tasks.base import Task
 
@@ -68,7 +75,18 @@ def _ball3d_expert(task: Task) -> Act:
     return act
 
 
-SCRIPTED: dict[str, Callable[[Task], Act]] = {"basic": _basic_expert, "ball3d": _ball3d_expert}
+def _mimic_expert(task: Task) -> Act:
+    """The reference PD: each decision the PD targets are the reference clip's joint angles at the
+    frame the decision leads to, through the inverse of the task's action map (the ``motion``
+    environment parameter chooses the clip: ``--env-param motion=2``)."""
+    def act(obs, mask):
+        continuous = task.reference_actions().astype(np.float32)
+        return continuous, np.zeros((len(continuous), 0), np.int32)
+    return act
+
+
+SCRIPTED: dict[str, Callable[[Task], Act]] = {"basic": _basic_expert, "ball3d": _ball3d_expert,
+                                              "mimic": _mimic_expert}
 
 
 def onnx_policy(path: str, task: Task) -> Act:
@@ -112,15 +130,40 @@ def _action_proto(continuous: np.ndarray, discrete: np.ndarray) -> AgentActionPr
     return AgentActionProto(continuous_actions=continuous.tolist(), discrete_actions=discrete.tolist())
 
 
+def parse_env_params(pairs: list[str] | None) -> EnvironmentParameters:
+    """``["motion=2"]`` -> environment parameters holding those constants (as a trainer's
+    ``environment_parameters`` would send them); RecordError for anything but KEY=NUMBER."""
+    params = EnvironmentParameters()
+    for pair in pairs or []:
+        key, sep, text = pair.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = None
+        if not sep or not key or value is None:
+            raise RecordError(f"--env-param {pair!r}: write KEY=NUMBER, e.g. --env-param motion=2")
+        params.set(key, lambda value=value: value)
+    return params
+
+
 def record(task_name: str, out_path: str, policy: str, steps: int = DEFAULT_STEPS, seed: int = 0,
-           num_areas: int = 1) -> tuple[int, int, float]:
-    """Write ``out_path``; returns (records, episodes, mean episode return)."""
+           num_areas: int = 1, env_params: list[str] | None = None, noise: float = 0.0) -> tuple[int, int, float]:
+    """Write ``out_path``; returns (records, episodes, mean episode return). ``env_params``: KEY=NUMBER
+    environment parameters the task reads (``--env-param``); ``noise`` (``--demo-noise``): see the
+    module docstring."""
     if steps < 1:
         raise RecordError(f"--demo-steps must be at least 1, got {steps}")
     if not out_path.endswith(".demo"):
         raise RecordError(f"--record-demo {out_path!r}: the file name must end in .demo (trainers read "
                           "only those)")
-    task = make_task(task_name, num_areas=num_areas, seed=seed)
+    if not noise >= 0:
+        raise RecordError(f"--demo-noise must be 0 or more, got {noise}")
+    rng = np.random.default_rng(seed)
+    params = parse_env_params(env_params)
+    try:
+        task = make_task(task_name, num_areas=num_areas, seed=seed, env_params=params)
+    except ValueError as error:  # a task refusing a parameter's value names it
+        raise RecordError(f"--env-param: {error}") from None
     folder = os.path.dirname(out_path)
     if folder:
         os.makedirs(folder, exist_ok=True)
@@ -144,6 +187,10 @@ def record(task_name: str, out_path: str, policy: str, steps: int = DEFAULT_STEP
             infos = academy.collect_infos()
             continuous, discrete = act(obs, mask)
             actions = [_action_proto(continuous[i], discrete[i]) for i in range(task.num_agents)]
+            executed = actions
+            if noise > 0 and spec.continuous_size:  # DART: act with noise, record the expert's label
+                noisy = np.clip(continuous + rng.normal(0.0, noise, continuous.shape), -1.0, 1.0)
+                executed = [_action_proto(noisy[i].astype(np.float32), discrete[i]) for i in range(task.num_agents)]
             deciding = [info for info in infos if not info.done]
             for info in infos:
                 if info.done:  # the terminal record closes the episode: the whole episode goes out
@@ -154,16 +201,18 @@ def record(task_name: str, out_path: str, policy: str, steps: int = DEFAULT_STEP
                         break
             for info, action in zip(deciding, actions):
                 episodes.setdefault(info.id, []).append((info, action))
-            academy.apply_actions(actions)
+            academy.apply_actions(executed)
             academy.advance()
         mean = writer.total_reward / writer.episodes if writer.episodes else 0.0
         return writer.steps, writer.episodes, mean
 
 
-def run(task_name: str, out_path: str, policy: str, steps: int | None, seed: int, num_areas: int | None) -> int:
+def run(task_name: str, out_path: str, policy: str, steps: int | None, seed: int, num_areas: int | None,
+        env_params: list[str] | None = None, noise: float = 0.0) -> int:
     """The CLI's --record-demo: one line of result on stdout; exit code 2 for bad arguments."""
     try:
-        count, episodes, mean = record(task_name, out_path, policy, steps or DEFAULT_STEPS, seed, num_areas or 1)
+        count, episodes, mean = record(task_name, out_path, policy, steps or DEFAULT_STEPS, seed, num_areas or 1,
+                                       env_params, noise)
     except RecordError as error:
         print(f"unity-stub-env: {error}", file=sys.stderr)
         return 2

@@ -86,8 +86,72 @@ def test_an_onnx_policy_records_its_deterministic_actions(tmp_path):
     (["--task", "basic", "--record-demo", "x.demo", "--policy", "missing.onnx"], "neither 'scripted'"),
     (["--task", "basic", "--record-demo", "x.demo"], "--policy"),
     (["--task", "basic", "--record-demo", "x.txt", "--policy", "scripted"], "must end in .demo"),
+    (["--task", "mimic", "--record-demo", "x.demo", "--policy", "scripted", "--env-param", "motion"], "KEY=NUMBER"),
+    (["--task", "mimic", "--record-demo", "x.demo", "--policy", "scripted", "--env-param", "motion=7"],
+     "motion must be 0..3"),
+    (["--task", "mimic", "--record-demo", "x.demo", "--policy", "scripted", "--demo-noise", "-1"], "--demo-noise"),
 ])
 def test_cli_refuses_bad_arguments_with_exit_code_2(tmp_path, args, message):
     done = subprocess.run([sys.executable, "-m", "unity_stub_env.cli", *args], cwd=tmp_path,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and message in done.stderr and "Traceback" not in done.stderr
+
+
+def test_mimic_inverse_action_map_round_trips_hand_computed_targets():
+    from unity_stub_env.tasks.mimic import MimicTask
+    from unity_stub_env.tasks.mimic_motions import JOINTS
+
+    task = MimicTask(1, 0)
+    knee, hip_x, elbow = JOINTS.index("knee_r"), JOINTS.index("hip_x_r"), JOINTS.index("elbow_l")
+    targets = np.zeros((task.num_agents, len(JOINTS)))
+    # knee 0..150 deg: 75 deg is half way up; hip x -30..120 deg: -15 deg half way down; elbow 0 = neutral
+    targets[:, knee], targets[:, hip_x], targets[:, elbow] = np.radians(75.0), np.radians(-15.0), 0.0
+    actions = task.absolute_actions(targets)
+    assert actions[0, knee] == pytest.approx(0.5) and actions[0, hip_x] == pytest.approx(-0.5)
+    assert actions[0, elbow] == 0.0
+    assert np.abs(actions).max() <= 1.0
+    np.testing.assert_allclose(task.targets(actions), targets, atol=1e-12)
+    # targets at the limits map to +-1 and back
+    np.testing.assert_allclose(task.absolute_actions(task.high), 1.0)
+    np.testing.assert_allclose(task.targets(task.absolute_actions(task.low)), task.low, atol=1e-12)
+
+
+def test_mimic_expert_tracks_the_squat_clip_with_the_reference_pd_pose_reward(tmp_path):
+    # only the pose term in the reward: each record's reward is r_r of that decision
+    weights = ["w_r=1", "w_v=0", "w_m=0", "w_e=0", "w_t=0"]
+    path = str(tmp_path / "squat.demo")
+    steps, episodes, mean = record_demo.record("mimic", path, "scripted", steps=400, env_params=["motion=2", *weights])
+    # 8 ragdolls, RSI; the first whole episode is 500 decisions + its terminal record: it did not fall
+    assert (steps, episodes) == (501, 1)
+    assert 0.93 < mean / 500 < 0.97  # the reference PD's squat r_r (zero actions: 0.29)
+    # the recorded actions are the inverse map of the clip, not zeros: the knees bend
+    knee = 17
+    actions = np.array([list(p.action_info.continuous_actions) for p in read_demo(path).pairs[:-1]])
+    assert actions.shape == (500, 26) and np.abs(actions).max() <= 1.0 and actions[:, knee].max() > 0.3
+    # the same motion with zero actions stays upright but far from the clip
+    original = record_demo.SCRIPTED["mimic"]
+    try:
+        record_demo.SCRIPTED["mimic"] = lambda task: lambda obs, mask: (
+            np.zeros((len(obs[0]), 26), np.float32), np.zeros((len(obs[0]), 0), np.int32))
+        _, _, zero_mean = record_demo.record("mimic", str(tmp_path / "z.demo"), "scripted", steps=400,
+                                             env_params=["motion=2", *weights])
+    finally:
+        record_demo.SCRIPTED["mimic"] = original
+    assert zero_mean / 500 < 0.5
+
+
+def test_demo_noise_acts_noisily_but_records_the_experts_clean_actions(tmp_path):
+    from unity_stub_env.tasks.mimic import MimicTask
+
+    path = str(tmp_path / "noisy.demo")
+    steps, episodes, mean = record_demo.record("mimic", path, "scripted", steps=300, env_params=["motion=2"], noise=0.1)
+    assert episodes >= 2 and mean < 100.0  # the noisy ragdolls fall long before the 500 decisions (clean: ~475)
+    task = MimicTask(1, 0)
+    frames, offset = task.ref.frames[2], task.ref.offset[2]
+    for pair in read_demo(path).pairs:
+        if pair.agent_info.done:
+            continue
+        phase = pair.agent_info.observations[0].float_data.data[-1]
+        frame = round(phase * frames)
+        expected = task.absolute_actions(task.ref.joints[offset + (frame + 1) % frames][None].repeat(task.num_agents, 0))[0]
+        np.testing.assert_allclose(list(pair.action_info.continuous_actions), expected, atol=1e-6)

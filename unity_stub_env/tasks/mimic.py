@@ -353,6 +353,21 @@ class MimicTask(Task):
         residual = np.clip(following + action * self.residual[:, None] * 0.5 * span, self.low, self.high)
         return np.where(self.residual[:, None] > 0, residual, absolute)
 
+    def absolute_actions(self, targets: np.ndarray) -> np.ndarray:
+        """The inverse of the default (absolute) map of ``targets``: actions [n, 26] in [-1, 1] whose PD
+        targets are ``targets`` [n, 26] (rad, within the limits): q / high for q >= 0, -q / low below."""
+        q = np.clip(targets, self.low, self.high)
+        up = np.divide(q, self.high, out=np.zeros_like(q), where=self.high > 0)
+        down = np.divide(-q, self.low, out=np.zeros_like(q), where=self.low < 0)
+        return np.where(q >= 0.0, up, down)
+
+    def reference_actions(self) -> np.ndarray:
+        """[n, 26]: the actions that put every PD target on the reference frame the next decision leads
+        to (what ``targets`` aims at): the absolute map's inverse, or 0 in ``residual`` mode. The
+        scripted expert of ``--record-demo`` (unity_stub_env/record_demo.py)."""
+        following = self.ref.joints[self.ref_rows((self.frame + 1) % self.ref.frames[self.motion])]
+        return np.where(self.residual[:, None] > 0, 0.0, self.absolute_actions(following))
+
     def observe(self) -> list[np.ndarray]:
         """[float32 [n, 170]]: see the module docstring for the order."""
         data, n = self.data, self.num_agents
