@@ -53,6 +53,12 @@ def pad_mates(array: np.ndarray, width: int, axis: int = 1) -> np.ndarray:
     return np.pad(array, pad)
 
 
+def with_self(mates_present: torch.Tensor) -> torch.Tensor:
+    """present [n, 1 + M]: the agent itself (always present) before its M teammates' slots. Also
+    for M = 0 (agents without a group, e.g. soccer's players), where ``mates_present[:, :1]`` is empty."""
+    return torch.cat([mates_present.new_ones((mates_present.shape[0], 1)), mates_present], dim=1)
+
+
 def lonely_group(traj: Trajectory, spec: BehaviorSpec) -> GroupColumns:
     """The group columns of an agent without teammates (group id 0)."""
     n, a = len(traj), spec.action_spec
@@ -87,12 +93,11 @@ class POCATrainer(PPOTrainer):
         mates = [t(o) for o in group.obs]
         present = t(group.present)
         everyone = [torch.cat([o.unsqueeze(1), m], dim=1) for o, m in zip(own, mates)]
-        with_self = torch.cat([torch.ones_like(present[:, :1]), present], dim=1)
         after = [torch.cat([t(np.asarray(n, np.float32))[None], t(m)], dim=0)[None]
                  for n, m in zip(traj.next_obs, group.next_obs)]
         after_present = t(np.concatenate([[True], group.next_present]))[None]
         with torch.inference_mode():
-            values = self.critic.value(everyone, with_self)
+            values = self.critic.value(everyone, with_self(present))
             baselines = self.critic.baseline(own, mates, t(group.continuous_actions), t(group.discrete_actions), present)
             next_values = self.critic.value(after, after_present)
         return ({k: v.cpu().numpy() for k, v in values.items()}, {k: v.cpu().numpy() for k, v in baselines.items()},
@@ -158,7 +163,7 @@ class POCATrainer(PPOTrainer):
         allowed = batch["allowed"] if self.behavior_spec.action_spec.discrete_branches else None
         log_probs, entropy = self.policy.evaluate(obs, allowed, batch["continuous_actions"], batch["discrete_actions"])
         everyone = [torch.cat([o.unsqueeze(1), m], dim=1) for o, m in zip(obs, mates)]
-        values = self.critic.value(everyone, torch.cat([torch.ones_like(present[:, :1]), present], dim=1))
+        values = self.critic.value(everyone, with_self(present))
         baselines = self.critic.baseline(obs, mates, batch["mates_continuous"], batch["mates_discrete"], present)
         names = list(values)
         returns = {n: batch[f"returns:{n}"] for n in names}
