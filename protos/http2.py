@@ -102,6 +102,13 @@ class _ReadBuffer:
         target += self._view[:count]
         return count
 
+    def release(self) -> None:
+        """Free the buffer now. A closed transport can outlive its ``close()`` as cyclic garbage
+        (the traceback of the error that ended its simulator refers to it), which Python's
+        collector frees only at its rare full collections: before this, every simulator restart
+        kept 1 MiB (the soak's trainer grew ~1 MB per simulator kill, bench/RESULTS.md)."""
+        self._view.release()  # the only reference to the bytearray: freed here
+
 
 class Http2Error(Exception):
     """The peer broke the HTTP/2 protocol; the connection is closed with GOAWAY."""
@@ -896,3 +903,5 @@ class Http2Transport:
         self._connections.clear()
         self._ready.clear()
         self._selector.close()
+        self.session = None  # (connection <-> transport: no cycle left through it)
+        self.reader.release()

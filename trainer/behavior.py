@@ -54,14 +54,19 @@ def hyperparams_from_settings(settings) -> PPOHyperparams:
         memory_size=n.memory.memory_size if n.memory is not None else 0,
         sequence_length=n.memory.sequence_length if n.memory is not None else 64,
         reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
-        reward_signal_networks={
-            name: SignalNetwork(learning_rate=rs.learning_rate, hidden_units=rs.network_settings.hidden_units,
-                                num_layers=rs.network_settings.num_layers,
-                                normalize=rs.network_settings.normalize,
-                                vis_encode_type=rs.network_settings.vis_encode_type)
-            for name, rs in settings.reward_signals.items() if name != "extrinsic"
-        },
+        reward_signal_networks=signal_networks(settings),
     )
+
+
+def signal_networks(settings) -> dict[str, SignalNetwork]:
+    """Each intrinsic reward signal's own network settings (PPO and SAC alike)."""
+    return {
+        name: SignalNetwork(learning_rate=rs.learning_rate, hidden_units=rs.network_settings.hidden_units,
+                            num_layers=rs.network_settings.num_layers,
+                            normalize=rs.network_settings.normalize,
+                            vis_encode_type=rs.network_settings.vis_encode_type)
+        for name, rs in settings.reward_signals.items() if name != "extrinsic"
+    }
 
 
 def sac_hyperparams_from_settings(settings) -> "SACHyperparams":
@@ -78,7 +83,9 @@ def sac_hyperparams_from_settings(settings) -> "SACHyperparams":
         max_steps=settings.max_steps, normalize=n.normalize, hidden_units=n.hidden_units,
         num_layers=n.num_layers, vis_encode_type=n.vis_encode_type, deterministic=n.deterministic,
         memory_size=n.memory.memory_size if n.memory is not None else 0,
+        sequence_length=n.memory.sequence_length if n.memory is not None else 64,
         reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
+        reward_signal_networks=signal_networks(settings),
     )
 
 

@@ -5,7 +5,9 @@ trainer reaches it, it sends itself SIGKILL, so nothing runs afterwards (no hand
 no flush), exactly as when a node dies or the OOM killer strikes. ``POINT:N:SIGTERM`` (or another
 signal name) sends that signal instead, which lands in the middle of what follows the point (an
 update, a checkpoint write): the way to test that a stop request there still ends with a loadable
-checkpoint. Unarmed, ``reached`` costs one comparison. tests/integration/test_kill_and_resume.py walks these points to prove that
+checkpoint. ``POINT:N:SIGSTOP`` freezes the trainer there (it cannot be handled): a test then
+kills the trainer and its simulators at once, as a node failure, at a moment known in steps
+rather than in wall-clock time (tests/slurm/test_train_sbatch.py). Unarmed, ``reached`` costs one comparison. tests/integration/test_kill_and_resume.py walks these points to prove that
 ``--resume`` always finds the newest complete checkpoint (docs/reliability.md).
 """
 from __future__ import annotations

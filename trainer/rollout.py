@@ -203,6 +203,26 @@ class AgentTracker:
             self._free.append(slot)
         self._index = None
 
+    def on_lost_terminal(self, agent_ids: np.ndarray, emit: Callable[[Trajectory], None]) -> int:
+        """Agents whose episode ended with a step the codec dropped for NaN/Inf
+        (trainer/protocol/codec.py): the decision that awaited that step's reward is discarded,
+        the experiences before it go out as a trajectory that ends interrupted (done, bootstrapped
+        from the value of that decision's observation, the last finite one), and the episode is
+        closed without entering the episode statistics (its return is unknown). Returns the
+        number of episodes closed. (With no experience left to emit, a trainer's per-episode
+        entries for curiosity/memory sums stay until the run ends: one small entry per case.)"""
+        found, known = self._lookup(np.asarray(agent_ids, dtype=np.int64))
+        closed = 0
+        for agent, slot in zip(np.asarray(agent_ids)[known].tolist(), found[known].tolist()):
+            n = int(self.length[slot])
+            if n > 0:
+                emit(self._emit(slot, int(agent), [buf[slot, n] for buf in self.obs], True, True))
+            del self._slot_of[int(agent)]
+            self._free.append(slot)
+            closed += 1
+        self._index = None
+        return closed
+
     def on_decision(self, ds: DecisionSteps, emit: Callable[[Trajectory], None]) -> np.ndarray:
         """Agents asking for a decision: pair their reward with the previous action, cut at
         time_horizon, remember the new observation. Returns their slots (for ``on_actions``)."""

@@ -405,13 +405,18 @@ class RunState:
                     router.queue(cid, payload)
             self.pending_reset = self.pending_reset or must_reset
 
-    def count_dropped(self, results: list[StepResult]) -> None:
+    def count_dropped(self, results: list[StepResult], trajectories: list) -> None:
         """Agent steps the codec left out for NaN/Inf (trainer/protocol/codec.py), summed into
-        each brain's summaries."""
-        for res in results:
+        each brain's summaries; the episodes whose last step was one of them are ended
+        (``AgentTracker.on_lost_terminal``), their last trajectory appended to ``trajectories``."""
+        for env_id, res in enumerate(results):
             for behavior, dropped in res.dropped.items():
                 self.reporter.add(brain_name_of(behavior)[0], NON_FINITE_STAT, dropped.count,
                                   StatsAggregationMethod.SUM)
+                tracker = self.trackers.get((env_id, behavior)) if len(dropped.ended) else None
+                if tracker is not None:
+                    runner = self.ensure_runner(behavior)
+                    tracker.on_lost_terminal(dropped.ended, lambda t, r=runner: trajectories.append((r, t)))
 
     # ------------------------------------------------------------------ side channels
     def side_channel_in(self, results: list[StepResult]) -> None:
@@ -620,8 +625,8 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
             STOP.check()  # stop signals take effect here, between steps (trainer.stop)
             state.recorder.observe(results)
             state.side_channel_in(results)
-            state.count_dropped(results)
             trajectories: list = []
+            state.count_dropped(results, trajectories)
             actions, decided = state.decide(results)
             if state.finished:
                 state.record(decided, trajectories)

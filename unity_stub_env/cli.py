@@ -230,8 +230,8 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
         academy = Academy(task, args.decision_period, counter)  # construction is the first RESET
         brains = {key: build_brain_parameters(key, task.action_spec) for key, _ in academy.behaviors}
         academies.append((academy, brains))
-        logger.info("Task %s: behavior(s) %s, %d agents (%d areas), seed %d, decision period %d",
-                    task.name, ", ".join(brains), task.num_agents, num_areas, task.seed,
+        logger.info("Task %s: %s %s, %d agents (%d areas), seed %d, decision period %d",
+                    task.name, "behavior" if len(brains) == 1 else "behaviors", ", ".join(brains), task.num_agents, num_areas, task.seed,
                     academy.decision_period)
     exchanges = 0
     while True:

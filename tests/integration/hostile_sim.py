@@ -99,6 +99,10 @@ def first_step(case: str) -> bytes:
         return step([agent()], params(continuous=0, branches=[2] * 10**6))
     if case == "zero_branch":
         return step([agent()], params(continuous=0, branches=[3, 0]))
+    if case == "branch_count_mismatch":  # 3 branches claimed, 2 sizes listed
+        bp = params(continuous=0, branches=[3, 2])
+        bp.action_spec.num_discrete_actions = 3
+        return step([agent()], bp)
     if case == "no_observations":
         return step([agent(obs=None)], params())
     if case == "no_brain_parameters":

@@ -68,6 +68,7 @@ CASES = [
     ("huge_continuous", "Behavior 'H?team=0' declares 100000000 continuous actions (at most 2048)"),
     ("huge_branches", "Behavior 'H?team=0' declares 1000000 discrete branches (at most 1024)"),
     ("zero_branch", "declares discrete branch sizes [3, 0]: every branch needs at least one option"),
+    ("branch_count_mismatch", "Behavior 'H?team=0' declares 3 discrete branches but lists 2 branch sizes [3, 2]"),
     ("no_observations", "Behavior 'H' sent an agent without any observation"),
     ("no_brain_parameters", "agents of behavior 'H?team=0' without ever sending its brain_parameters"),
     ("missing_observation", "sent fewer observations than its first agent"),
@@ -85,6 +86,8 @@ def test_a_hostile_first_message_is_one_clear_error_and_exit_2(tmp_path, env_no_
     assert r.returncode == 2, r.stderr[-3000:]
     assert message.replace("'H'", "'H?team=0'") in r.stderr or message in r.stderr, r.stderr[-3000:]
     assert "Traceback" not in r.stderr and "MemoryError" not in r.stderr
+    if case not in ("wrong_version", "no_observations"):  # (found in the handshake / by the trainer)
+        assert "The simulator (" in r.stderr and "Hostile" in r.stderr, r.stderr[-3000:]  # which one
 
 
 def test_a_spec_change_mid_run_stops_with_a_final_checkpoint(tmp_path, env_no_proxy):

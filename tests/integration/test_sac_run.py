@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import signal
 import sys
+from pathlib import Path
 
 import numpy as np
 import onnxruntime as ort
@@ -77,3 +78,38 @@ def test_sac_trains_saves_its_replay_buffer_and_resumes_it(tmp_path, env_no_prox
     assert code == 0, text
     assert json.loads(status_file.read_text())["Basic"] == before
     assert f"at step {before['final_checkpoint']['steps']}" in text
+
+
+def test_sac_with_memory_curiosity_and_rnd_trains_exports_and_resumes(tmp_path, env_no_proxy):
+    """The features that were refused with SAC, end to end: an LSTM (recurrent ONNX), curiosity
+    and RND (their TensorBoard tags as the reference), and a resume that brings them back."""
+    text = Path(sac_config(tmp_path, "m.yaml", 600)).read_text()
+    text = text.replace("      hidden_units: 20\n", "      hidden_units: 20\n      memory: {memory_size: 8, sequence_length: 4}\n")
+    text = text.replace("        strength: 1.0\n", "        strength: 1.0\n"
+                        "      curiosity: {gamma: 0.99, strength: 0.02, network_settings: {hidden_units: 16}}\n"
+                        "      rnd: {gamma: 0.99, strength: 0.01, network_settings: {hidden_units: 8, num_layers: 1}}\n")
+    assert "memory_size: 8" in text and "rnd:" in text
+    cfg, cfg2 = tmp_path / "m.yaml", tmp_path / "m2.yaml"
+    cfg.write_text(text)
+    cfg2.write_text(text.replace("max_steps: 600", "max_steps: 1000"))
+    common = ["--env", "stub:basic", "--seed", "5", "--run-id", "m", "--results-dir", str(tmp_path / "results"),
+              "--base-port", str(free_port_block())]
+    r = learn([str(cfg), *common], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    tags = tb_scalars(tmp_path / "results/m/Basic")
+    for tag in ("Losses/Curiosity Forward Loss", "Losses/Curiosity Inverse Loss", "Losses/RND Loss",
+                "Policy/Curiosity Reward", "Policy/Rnd Reward", "Policy/Curiosity Value", "Policy/Rnd Value",
+                "Losses/Q1 Loss"):
+        assert tag in tags, tag
+    assert all(v > 0 for _, v in tags["Policy/Rnd Reward"])  # prediction errors
+    session = ort.InferenceSession(str(tmp_path / "results/m/Basic.onnx"))
+    assert [i.name for i in session.get_inputs()] == ["obs_0", "action_masks", "recurrent_in"]
+    out = session.run(["recurrent_out"], {"obs_0": np.eye(20, dtype=np.float32)[:2],
+                                          "action_masks": np.ones((2, 3), np.float32),
+                                          "recurrent_in": np.zeros((2, 1, 8), np.float32)})
+    assert out[0].shape == (2, 1, 8) and np.abs(out[0]).sum() > 0
+    r2 = learn([str(cfg2), *common, "--resume"], cwd=tmp_path, env=env_no_proxy)
+    assert r2.returncode == 0, r2.stderr[-3000:]
+    assert "starts untrained" not in r2.stdout + r2.stderr  # curiosity and RND came back
+    status = json.loads((tmp_path / "results/m/run_logs/training_status.json").read_text())
+    assert status["Basic"]["final_checkpoint"]["steps"] >= 1000

@@ -140,6 +140,7 @@ def test_agents_with_nan_or_inf_are_left_out_and_counted(kwargs, agents):
     deciding = agents - 2 + (0 if kwargs.get("done") else 1)
     assert (dropped.count, dropped.deciding) == (1, deciding)
     assert dropped.kept.tolist() == [p for p in range(deciding) if p != 1 or kwargs.get("done")]
+    assert dropped.ended.tolist() == ([42] if kwargs.get("done") else [])  # its episode ends unseen
 
 
 # ------------------------------------------------------------------ action masks

@@ -115,7 +115,18 @@ HOSTILE_SPECS = [
     ("a branch of 10^9 options", "brain_params('B', 0, [10**9])", "1000000000 discrete options"),
     ("negative continuous count", "brain_params('B', -5)", "declares -5 continuous actions"),
     ("a zero-size branch", "brain_params('B', 0, [3, 0])", "every branch needs at least one option"),
+    ("a branch count above its size list", "with_branch_count(brain_params('B', 0, [3, 2]), 5)",
+     "declares 5 discrete branches but lists 2 branch sizes [3, 2]"),
+    ("a branch count below its size list", "with_branch_count(brain_params('B', 1, [4]), 0)",
+     "declares 0 discrete branches but lists 1 branch sizes [4]"),
+    ("a negative branch count", "with_branch_count(brain_params('B', 0), -3)",
+     "declares -3 discrete branches but lists 0 branch sizes []"),
 ]
+
+
+def with_branch_count(params, count: int):
+    params.action_spec.num_discrete_actions = count
+    return params
 
 
 @pytest.mark.parametrize("params, fault", [c[1:] for c in HOSTILE_SPECS], ids=[c[0] for c in HOSTILE_SPECS])

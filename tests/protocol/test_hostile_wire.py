@@ -126,11 +126,13 @@ def test_a_new_connection_takes_over_once_the_session_has_gone(transport):
     second.close()
 
 
-def test_an_intruder_during_the_handshake_is_refused_and_the_simulator_trains_on(caplog):
-    """Endpoint level, with grpcio as both clients: M1 from the simulator, then another client's
-    Exchange gets FAILED_PRECONDITION naming the port; the session's RESET/STEP carry on."""
+@pytest.mark.parametrize("server_transport", ["http2", "grpcio"])
+def test_an_intruder_during_the_handshake_is_refused_and_the_simulator_trains_on(server_transport, caplog):
+    """Endpoint level, on both transports, with grpcio as both clients: M1 from the simulator,
+    then another client's Exchange gets FAILED_PRECONDITION naming the port, and one log line;
+    the session's RESET/STEP carry on."""
     port = free_port()
-    endpoint = UnityEndpoint(port, timeout_wait=10, transport="http2")
+    endpoint = UnityEndpoint(port, timeout_wait=10, transport=server_transport)
     endpoint.start()
     info = agent_info(1, obs=[[0.5]])
     step = rl_message({"B?team=0": [info]}, [brain_params("B?team=0", 1)])
@@ -151,12 +153,61 @@ def test_an_intruder_during_the_handshake_is_refused_and_the_simulator_trains_on
                     break
                 assert not endpoint.client_gone
         assert result["error"].code() == grpc.StatusCode.FAILED_PRECONDITION
-        assert f"port {port} is held by a live training session" in result["error"].details()
+        assert f"port {port} is held by a live training session with 127.0.0.1:" in result["error"].details()
         assert list(first.steps) == ["B?team=0"] and not endpoint.client_gone
+        refusals = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+        assert len(refusals) == 1 and "held by a live training session" in refusals[0], refusals
     finally:
         endpoint.close()  # answers the simulator's pending step with status 400
         sim.finish()
     assert sim.error is None and [r.header.status for r in sim.responses] == [200, 200, 400]
+
+
+def test_grpcio_fallback_serves_one_client_and_lets_a_reconnecting_one_take_over(caplog):
+    """MLAGENTS_LIKE_TRANSPORT=grpcio: the first client's calls reach the trainer; a second
+    client's call is refused (status 9) while the first lives; once the first drops its call
+    (a crashed simulator), a new client takes over and a third one is refused."""
+    from trainer.protocol.server import SERVICE, _GrpcioTransport
+
+    transport = _GrpcioTransport("127.0.0.1", free_port(), 1000)
+    transport.start()
+    # one connection each (grpcio would otherwise share one between the channels of a process)
+    channels = [grpc.insecure_channel(f"127.0.0.1:{transport.port}", options=[("grpc.use_local_subchannel_pool", 1)])
+                for _ in range(3)]
+    first, second, third = (ch.unary_unary(f"/{SERVICE}/Exchange") for ch in channels)
+    try:
+        pending = first.future(b"one", timeout=15)
+        call = transport.take(10)
+        assert call.payload == b"one"
+        with pytest.raises(grpc.RpcError) as refused:
+            second(b"inject", timeout=10)
+        assert refused.value.code() == grpc.StatusCode.FAILED_PRECONDITION
+        assert f"port {transport.port} is held by a live training session with 127.0.0.1:" in refused.value.details()
+        assert transport.take(0.1) is None and not transport.client_gone  # nothing reached the trainer
+        call.answer(b"ok")
+        assert pending.result() == b"ok"
+        pending = first.future(b"two", timeout=15)
+        assert transport.take(10).payload == b"two"
+        pending.cancel()  # the session's simulator goes away with its call unanswered
+        assert transport.take(10) is None and transport.client_gone
+        later = second.future(b"again", timeout=15)  # a reconnecting simulator takes over
+        taken = None
+        for _ in range(200):  # (take() no longer waits once client_gone is set)
+            taken = transport.take(0.05) or (time.sleep(0.05) or None)
+            if taken is not None:
+                break
+        assert taken.payload == b"again"
+        with pytest.raises(grpc.RpcError) as refused:
+            third(b"inject", timeout=10)
+        assert refused.value.code() == grpc.StatusCode.FAILED_PRECONDITION
+        taken.answer(b"served")
+        assert later.result() == b"served"
+        warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+        assert len(warnings) == 2 and all("held by a live training session" in w for w in warnings), warnings
+    finally:
+        for ch in channels:
+            ch.close()
+        transport.close(grace=0.1)
 
 
 def _exchange_error(stub, message):
@@ -165,6 +216,29 @@ def _exchange_error(stub, message):
     except grpc.RpcError as error:
         return error
     return None
+
+
+def test_closed_transports_hold_no_read_buffer_even_when_something_still_refers_to_them():
+    """A restarted simulator's transport is closed, but the traceback of the error that ended
+    the simulator can keep it alive until Python's next full collection; each one used to hold
+    its 1 MiB read buffer meanwhile (the soak's trainer grew ~1 MB per simulator kill)."""
+    kept = []
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        for _ in range(10):
+            t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+            t.start()
+            good = GoodClient(t)
+            assert good.call(b"m1") == b"ok"  # a session, as a simulator's
+            good.close()
+            t.close(grace=0.1)
+            kept.append(t)  # still referenced, as by a traceback
+        held = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert held < 2 << 20, held  # was 11.7 MB: 1 MiB each + the test clients; now 1.2 MB
+    assert all(t.session is None for t in kept)
 
 
 # ------------------------------------------------------------------ idle connections, slow-loris

@@ -38,10 +38,10 @@ behaviors:
 """
 
 
-def submit(cluster, tmp_path: Path, *learn_args: str) -> tuple[str, Path]:
+def submit(cluster, tmp_path: Path, *learn_args: str, sbatch_args: tuple[str, ...] = ()) -> tuple[str, Path]:
     cfg = tmp_path / "basic.yaml"
     cfg.write_text(CONFIG)
-    job = cluster.sbatch("--mem=1G", "--cpus-per-task=1", f"--output={tmp_path}/slurm-%j.out", TEMPLATE, str(cfg),
+    job = cluster.sbatch(*sbatch_args, "--mem=1G", "--cpus-per-task=1", f"--output={tmp_path}/slurm-%j.out", TEMPLATE, str(cfg),
                          "--env", "stub:basic", "--seed", "1", "--results-dir", str(tmp_path / "results"),
                          *learn_args)
     return job, tmp_path / f"slurm-{job}.out"
@@ -123,25 +123,56 @@ def test_warning_signal_requeues_and_the_job_resumes_to_completion(cluster, tmp_
     assert abs(counted - final) < SUMMARY / 5, (counted, final)
 
 
+# buffer_size 256: the 18th update comes at ~4,610 steps, after the checkpoint of 4000 and the
+# summary of 4500, before the checkpoint of 5000; a run resumed from 4000 makes ~8 updates to 6000
+FREEZE_AT_UPDATE = 18
+
+
+def frozen_pids(cluster, job: str, log: Path, timeout: float = 240) -> list[int]:
+    """The job's processes once one of them (the trainer) has stopped itself with SIGSTOP."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and cluster.job(job).get("JobState") in ("PENDING", "RUNNING"):
+        out = cluster.run("scontrol", "listpids", job, check=False).stdout
+        pids = [int(line.split()[0]) for line in out.splitlines()[1:] if line.split()[:1] != ["-1"]]
+        for pid in pids:
+            try:
+                state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+            except (OSError, IndexError):
+                continue
+            if state == "T":
+                return pids
+        time.sleep(0.2)
+    raise TimeoutError(f"no process of job {job} stopped ({cluster.job(job)}):\n" + log.read_text()[-3000:])
+
+
 def test_a_job_killed_without_warning_resumes_from_its_last_periodic_checkpoint(cluster, tmp_path):
-    job, log = submit(cluster, tmp_path)
-    wait_for_line(log, r"Basic\. Step: 2500\.")
-    pids = [int(line.split()[0]) for line in cluster.run("scontrol", "listpids", job).stdout.splitlines()[1:]]
+    """The trainer freezes itself (MLAGENTS_LIKE_CRASH_AT=update:18:SIGSTOP, trainer/crash_points.py)
+    at the same step however loaded the machine is; then every process of the job is killed at
+    once, as in a node failure. The requeued job resumes from the newest checkpoint on disk."""
+    freeze = f"--export=ALL,MLAGENTS_LIKE_CRASH_AT=update:{FREEZE_AT_UPDATE}:SIGSTOP"
+    job, log = submit(cluster, tmp_path, sbatch_args=(freeze,))
+    pids = frozen_pids(cluster, job, log)
     assert len(pids) >= 3  # batch shell, trainer, simulator
+    run = tmp_path / "results" / f"basic-{job}" / "Basic"
+    on_disk = sorted(int(m.group(1)) for f in run.iterdir() if (m := re.fullmatch(r"Basic-(\d+)\.pt", f.name)))
     for pid in pids:  # as a node failure: everything at once, no signal to handle
         os.kill(pid, signal.SIGKILL)
     killed = cluster.wait_for_state(job, ("FAILED", "CANCELLED", "COMPLETED"), timeout=60)
     assert killed["JobState"] == "FAILED", killed
-    checkpoints = re.findall(r"Exported \S+Basic-(\d+)\.onnx", log.read_text())
+    first = log.read_text()
+    checkpoints = [int(s) for s in re.findall(r"Exported \S+Basic-(\d+)\.onnx", first)]
+    summaries = [int(s) for s in re.findall(r"Basic\. Step: (\d+)\.", first)]
+    # frozen after the 4th periodic checkpoint and a summary past it, before the 5th checkpoint
+    assert on_disk == checkpoints and len(on_disk) == 4, (on_disk, checkpoints)
+    assert on_disk[-1] < summaries[-1] < on_disk[-1] + INTERVAL, (on_disk, summaries)
     cluster.run("scontrol", "requeue", job)  # what Slurm does for a --requeue job after a node failure
     info = cluster.wait_for_state(job, ("COMPLETED", "FAILED", "CANCELLED"), timeout=300)
     text = log.read_text()
     assert info["JobState"] == "COMPLETED" and int(info["Restarts"]) == 1, (info, text[-4000:])
     second = text.split("(restart 1)")[1]
     resumed = int(re.search(r"Loaded \S+checkpoint\.pt for behavior Basic at step (\d+)", second).group(1))
-    assert resumed == int(checkpoints[-1]) and resumed < 2500  # the last periodic one
+    assert resumed == on_disk[-1]  # the newest periodic checkpoint on disk when the job died
 
-    run = tmp_path / "results" / f"basic-{job}" / "Basic"
     per_file = raw_summary_steps(run)
     assert len(per_file) == 2 and set(per_file[0]) & set(per_file[1]), per_file  # steps written twice...
     labels = list(range(SUMMARY, MAX_STEPS + 1, SUMMARY))

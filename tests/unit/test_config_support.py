@@ -56,7 +56,7 @@ def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
     assert "self_play" not in message
 
 
-def test_sac_is_supported_but_not_with_memory_or_intrinsic_signals(tmp_path):
+def test_sac_is_supported_with_memory_and_intrinsic_signals(tmp_path):
     opts = options(tmp_path, """
         behaviors:
           Plain: {trainer_type: sac, network_settings: {normalize: true}}
@@ -66,10 +66,8 @@ def test_sac_is_supported_but_not_with_memory_or_intrinsic_signals(tmp_path):
             reward_signals: {extrinsic: {}, curiosity: {}, rnd: {}}
     """)
     assert unsupported(opts.behaviors["Plain"]) == []
-    assert [key for key, _ in unsupported(opts.behaviors["Fancy"])] == [
-        "network_settings.memory", "reward_signals.curiosity", "reward_signals.rnd"]
-    with pytest.raises(ConfigError, match=r"'behaviors\.Fancy\.network_settings\.memory'"):
-        check_supported(opts)
+    assert unsupported(opts.behaviors["Fancy"]) == []
+    check_supported(opts)
 
 
 def test_default_settings_are_checked_too(tmp_path):

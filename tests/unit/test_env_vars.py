@@ -60,6 +60,7 @@ def test_the_crash_hook_names_a_known_point_an_occurrence_and_optionally_a_stop_
     assert EnvVars.from_environ({}).crash_at is None
     assert EnvVars.from_environ({"MLAGENTS_LIKE_CRASH_AT": "checkpoint.onnx:3"}).crash_at == ("checkpoint.onnx", 3)
     assert EnvVars.from_environ({"MLAGENTS_LIKE_CRASH_AT": "update:2:SIGUSR1"}).crash_at == ("update", 2, "SIGUSR1")
+    assert EnvVars.from_environ({"MLAGENTS_LIKE_CRASH_AT": "update:18:SIGSTOP"}).crash_at == ("update", 18, "SIGSTOP")
     for bad in ("nowhere:1", "act:0", "act", "act:x", "act:1:SIGSEGV", "act:1:2:3"):
         with pytest.raises(ConfigError, match="MLAGENTS_LIKE_CRASH_AT"):
             EnvVars.from_environ({"MLAGENTS_LIKE_CRASH_AT": bad})

@@ -90,6 +90,36 @@ def test_schedule_pairs_rewards_cuts_and_terminates():
     assert tr.num_agents == 0
 
 
+def test_an_episode_whose_last_step_was_dropped_for_nan_ends_interrupted_without_its_pending_decision():
+    """The codec dropped agent 5's terminal step (NaN): the decision awaiting its reward is
+    discarded, the two experiences before it go out done + interrupted with that decision's
+    observation as next_obs, the episode leaves no slot and no episode statistics; agent 9 (two
+    decisions) and agent 11 (one pending decision, no experience) are handled alike."""
+    out = []
+    tr = AgentTracker(SPEC, time_horizon=5)
+    for step, (r5, r9) in enumerate([(0.0, 0.0), (1.0, 2.0), (3.0, 4.0)]):  # first rewards dropped
+        slots = tr.on_decision(ds([5, 9], [[0, step], [1, step]], [r5, r9]), out.append)
+        act(tr, slots, [step, step])
+    act(tr, tr.on_decision(ds([11], [[2, 0]], [0.0]), out.append), [2])
+    before = tr.num_agents
+    assert tr.on_lost_terminal(np.array([5, 11, 77]), out.append) == 2  # 77: never seen, ignored
+    assert tr.num_agents == before - 2 and len(out) == 1
+    t5 = out[0]
+    np.testing.assert_array_equal(t5.obs[0], [[0, 0], [0, 1]])  # step 2's decision discarded
+    np.testing.assert_array_equal(t5.next_obs[0], [0, 2])  # ...its observation bootstraps
+    np.testing.assert_allclose(t5.rewards, [1.0, 3.0])
+    np.testing.assert_array_equal(t5.discrete_actions[:, 0], [0, 1])
+    assert t5.done and t5.interrupted and t5.episode[1] == 5
+    assert tr.drain_episodes().rewards == []  # an unknown return is not reported
+    # agent 9 goes on untouched: its next reward (5) pairs with its step-2 action
+    act(tr, tr.on_decision(ds([9], [[1, 3]], [5.0]), out.append), [0])
+    tr.on_terminal(ts([9], [[1, 4]], [6.0], [False]), out.append)
+    assert len(out) == 2 and out[1].done and not out[1].interrupted
+    np.testing.assert_allclose(out[1].rewards, [2.0, 4.0, 5.0, 6.0])
+    assert tr.drain_episodes().rewards == [2.0 + 4.0 + 5.0 + 6.0]
+    assert tr.num_agents == 0
+
+
 def test_terminal_before_first_decision_is_ignored_and_drop_all_forgets():
     out = []
     tr = AgentTracker(SPEC, time_horizon=5)

@@ -73,3 +73,32 @@ def test_one_forward_pass_per_behavior_and_rows_go_back_to_their_simulator():
     (_, behavior, steps, _, masks, _), = decided
     assert behavior == "Ball?team=0"
     assert [(env, rows.start, rows.stop) for env, _, _, rows in steps] == [(0, 0, 2), (1, 2, 2), (2, 2, 5), (3, 5, 6)]
+
+
+def test_an_episode_whose_terminal_step_was_dropped_for_nan_ends_in_the_run_loop():
+    """The codec reports agent 9's terminal step on simulator 1 as dropped (NaN): the run loop
+    counts it and ends that episode in simulator 1's tracker (a done, interrupted trajectory of
+    its two rewarded decisions); simulator 0's agent 9, another episode, is untouched."""
+    from trainer.protocol.codec import NON_FINITE_STAT, Dropped
+    from trainer.rollout import AgentTracker
+
+    added = []
+    runner = SimpleNamespace(spec=SPEC, brain="Ball")
+    reporter = SimpleNamespace(add=lambda brain, key, value, how: added.append((brain, key, value)))
+    state = RunState(options=None, run_dir="", pool=None, params=None, reporter=reporter, status=None,
+                     timers=TimerTree(), progress=None, routers=[], runners={"Ball": runner})
+    for env in (0, 1):
+        tracker = state.trackers[(env, "Ball?team=0")] = AgentTracker(SPEC, time_horizon=10)
+        for step in range(3):  # three decisions: the last awaits its reward
+            slots = tracker.on_decision(decision_steps([9]), lambda t: None)
+            tracker.on_actions(slots, np.zeros((1, 1), np.float32), np.zeros((1, 1), np.int32),
+                               np.zeros((1, 2), np.float32), None)
+    lost = Dropped(count=1, deciding=0, kept=np.zeros(0, np.int64), ended=np.array([9]))
+    results = [StepResult(steps={}), StepResult(steps={}, dropped={"Ball?team=0": lost})]
+    trajectories: list = []
+    state.count_dropped(results, trajectories)
+    assert added == [("Ball", NON_FINITE_STAT, 1)]
+    (got_runner, traj), = trajectories
+    assert got_runner is runner and traj.done and traj.interrupted and len(traj.rewards) == 2
+    assert state.trackers[(1, "Ball?team=0")].num_agents == 0
+    assert state.trackers[(0, "Ball?team=0")].num_agents == 1

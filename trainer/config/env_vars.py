@@ -221,8 +221,8 @@ def _crash_at(value: str) -> tuple[str, int] | None:
     if len(parts) in (2, 3) and parts[0] in POINTS and re.fullmatch(r"[0-9]+", parts[1]) and int(parts[1]) >= 1:
         if len(parts) == 2:
             return parts[0], int(parts[1])
-        if parts[2] in ("SIGTERM", "SIGUSR1", "SIGINT", "SIGQUIT", "SIGKILL"):
+        if parts[2] in ("SIGTERM", "SIGUSR1", "SIGINT", "SIGQUIT", "SIGKILL", "SIGSTOP"):
             return parts[0], int(parts[1]), parts[2]
     raise ConfigError(f"{CRASH_AT}={value!r} is not POINT:N[:SIGNAL] with N >= 1, POINT one of "
-                      f"{', '.join(POINTS)} and SIGNAL a stop signal (a test hook that kills or stops the "
+                      f"{', '.join(POINTS)} and SIGNAL a stop signal or SIGSTOP (a test hook that kills or stops the "
                       f"trainer; unset it for a normal run).")

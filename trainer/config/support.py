@@ -12,25 +12,17 @@ from protos.types import ObservationType
 from trainer.config.settings import RunOptions, TrainerSettings
 from trainer.errors import ConfigError
 
-# reward signals the PPO room computes (trainer/ppo/trainer.py checks the same list)
+# reward signals the trainers compute (trainer/ppo/trainer.py and trainer/sac/trainer.py check
+# the same list: both take every provider of trainer/ppo/reward_providers.py)
 SUPPORTED_REWARD_SIGNALS = ("extrinsic", "curiosity", "rnd")
-SAC_REWARD_SIGNALS = ("extrinsic",)  # trainer/sac/trainer.py checks the same list
 
 
 def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
     """(key path inside a behavior block, what to do) for each unsupported feature ``ts`` uses."""
     found = []
-    if ts.trainer_type == "sac":
-        if ts.network_settings.memory is not None:
-            found.append(("network_settings.memory", "remove it; SAC with an LSTM memory is not implemented yet "
-                                                     "(PPO trains with memory)"))
-        for name in ts.reward_signals:
-            if name in SUPPORTED_REWARD_SIGNALS and name not in SAC_REWARD_SIGNALS:
-                found.append((f"reward_signals.{name}",
-                              f"remove it; SAC trains with {', '.join(SAC_REWARD_SIGNALS)} only for now"))
     if ts.trainer_type == "poca" and ts.network_settings.memory is not None:
         found.append(("network_settings.memory", "remove it; POCA with an LSTM memory is not implemented yet "
-                                                 "(PPO trains with memory)"))
+                                                 "(PPO and SAC train with memory)"))
     for name in ts.reward_signals:
         if name not in SUPPORTED_REWARD_SIGNALS:
             found.append((f"reward_signals.{name}",

@@ -91,7 +91,7 @@ class POCACritic(nn.Module):
             return self._heads(own, torch.ones(own.shape[:2], dtype=torch.bool, device=own.device))
         mates = self._encode(mates_obs)
         mates = self.obs_action_embedding(torch.cat([mates, self._actions(mates_continuous, mates_discrete)], dim=-1))
-        present = torch.cat([torch.ones_like(mates_present[:, :1]), mates_present], dim=1)
+        present = torch.cat([torch.ones((len(mates_present), 1), dtype=torch.bool, device=mates_present.device), mates_present], dim=1)
         return self._heads(torch.cat([own, mates], dim=1), present)
 
     def update_normalization(self, observations: Sequence[torch.Tensor]) -> None:

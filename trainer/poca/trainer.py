@@ -53,12 +53,6 @@ def pad_mates(array: np.ndarray, width: int, axis: int = 1) -> np.ndarray:
     return np.pad(array, pad)
 
 
-def with_self(mates_present: torch.Tensor) -> torch.Tensor:
-    """present [n, 1 + M]: the agent itself (always present) before its M teammates' slots. Also
-    for M = 0 (agents without a group, e.g. soccer's players), where ``mates_present[:, :1]`` is empty."""
-    return torch.cat([mates_present.new_ones((mates_present.shape[0], 1)), mates_present], dim=1)
-
-
 def lonely_group(traj: Trajectory, spec: BehaviorSpec) -> GroupColumns:
     """The group columns of an agent without teammates (group id 0)."""
     n, a = len(traj), spec.action_spec
@@ -66,6 +60,13 @@ def lonely_group(traj: Trajectory, spec: BehaviorSpec) -> GroupColumns:
     return GroupColumns([np.zeros((n, 0, *s), np.float32) for s in shapes], np.zeros((n, 0, a.continuous_size), np.float32),
                         np.zeros((n, 0, a.discrete_size), np.int32), np.zeros((n, 0), bool), np.zeros((n, 0), np.float32),
                         [np.zeros((0, *s), np.float32) for s in shapes], np.zeros(0, bool), True)
+
+
+def with_agent(mates_present: torch.Tensor) -> torch.Tensor:
+    """[n, M] teammates present -> [n, 1 + M] with the agent itself (always present) first; also
+    for M = 0 (no group: ``present[:, :1]`` would then be empty)."""
+    own = torch.ones((mates_present.shape[0], 1), dtype=torch.bool, device=mates_present.device)
+    return torch.cat([own, mates_present], dim=1)
 
 
 class POCATrainer(PPOTrainer):
@@ -93,11 +94,12 @@ class POCATrainer(PPOTrainer):
         mates = [t(o) for o in group.obs]
         present = t(group.present)
         everyone = [torch.cat([o.unsqueeze(1), m], dim=1) for o, m in zip(own, mates)]
+        with_self = with_agent(present)
         after = [torch.cat([t(np.asarray(n, np.float32))[None], t(m)], dim=0)[None]
                  for n, m in zip(traj.next_obs, group.next_obs)]
         after_present = t(np.concatenate([[True], group.next_present]))[None]
         with torch.inference_mode():
-            values = self.critic.value(everyone, with_self(present))
+            values = self.critic.value(everyone, with_self)
             baselines = self.critic.baseline(own, mates, t(group.continuous_actions), t(group.discrete_actions), present)
             next_values = self.critic.value(after, after_present)
         return ({k: v.cpu().numpy() for k, v in values.items()}, {k: v.cpu().numpy() for k, v in baselines.items()},
@@ -163,7 +165,7 @@ class POCATrainer(PPOTrainer):
         allowed = batch["allowed"] if self.behavior_spec.action_spec.discrete_branches else None
         log_probs, entropy = self.policy.evaluate(obs, allowed, batch["continuous_actions"], batch["discrete_actions"])
         everyone = [torch.cat([o.unsqueeze(1), m], dim=1) for o, m in zip(obs, mates)]
-        values = self.critic.value(everyone, with_self(present))
+        values = self.critic.value(everyone, with_agent(present))
         baselines = self.critic.baseline(obs, mates, batch["mates_continuous"], batch["mates_discrete"], present)
         names = list(values)
         returns = {n: batch[f"returns:{n}"] for n in names}

@@ -125,10 +125,11 @@ class NetworkBody(nn.Module):
         return self.hidden(encoded)
 
     def forward_memory(self, observations: Sequence[torch.Tensor], memories: torch.Tensor,
-                       sequence_length: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
+                       sequence_length: int = 1, actions: torch.Tensor | None = None
+                       ) -> tuple[torch.Tensor, torch.Tensor]:
         """Rows are n_seq sequences of ``sequence_length`` consecutive steps; memories
         [1, n_seq, m] is each sequence's start. -> (encoding [rows, m/2], memories [1, n_seq, m])."""
-        encoding = self.forward(observations)
+        encoding = self.forward(observations, actions)
         encoding = encoding.reshape(-1, sequence_length, encoding.shape[-1])
         encoding, memories = self.lstm(encoding, memories)
         return encoding.reshape(-1, self.memory_size // 2), memories
@@ -245,9 +246,10 @@ class Critic(nn.Module):
         return self._values(self.network_body(observations, actions))
 
     def forward_memory(self, observations: Sequence[torch.Tensor], memories: torch.Tensor,
-                       sequence_length: int = 1) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+                       sequence_length: int = 1, actions: torch.Tensor | None = None
+                       ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
         """``forward`` of a recurrent critic (see NetworkBody.forward_memory), plus the new memories."""
-        encoding, memories = self.network_body.forward_memory(observations, memories, sequence_length)
+        encoding, memories = self.network_body.forward_memory(observations, memories, sequence_length, actions)
         return self._values(encoding), memories
 
     def _values(self, encoding: torch.Tensor) -> dict[str, torch.Tensor]:

@@ -181,6 +181,13 @@ def _brief(values: Sequence[int]) -> str:
 
 def _action_spec_from_proto(brain_params) -> ActionSpec:
     spec = brain_params.action_spec
+    if spec.num_discrete_actions != len(spec.discrete_branch_sizes):  # ML-Agents fills both from one list
+        raise ProtocolError(
+            f"Behavior {brain_params.brain_name!r} declares {spec.num_discrete_actions} discrete branches "
+            f"but lists {len(spec.discrete_branch_sizes)} branch sizes "
+            f"{_brief(spec.discrete_branch_sizes)}: its action specification contradicts itself, so "
+            "the trainer cannot tell which actions it expects. The simulator does not fill its brain "
+            "parameters as ML-Agents does; fix how it builds them.")
     if spec.num_continuous_actions == 0 and spec.num_discrete_actions == 0:
         # communication API < 1.3 only fills the deprecated fields
         sizes = tuple(brain_params.vector_action_size_deprecated)
@@ -201,6 +208,7 @@ class Dropped(NamedTuple):
     count: int  # deciding and finished agents left out
     deciding: int  # deciding agents the simulator sent: it is owed one action row for each
     kept: np.ndarray  # int positions, among those, of the rows DecisionSteps holds
+    ended: np.ndarray  # int64 agent (episode) ids of finished agents left out: their episodes end unseen
 
 
 class NotAMessageError(ProtocolError):
@@ -333,7 +341,8 @@ def _drop_non_finite(behavior: str, fields: records.Decoded) -> tuple[records.De
         reward=fields.reward[ok], group_reward=fields.group_reward[ok], agent_id=fields.agent_id[ok],
         group_id=fields.group_id[ok], done=fields.done[ok], max_step=fields.max_step[ok],
         obs=[o[ok] for o in fields.obs], mask=fields.mask[ok])
-    return kept, Dropped(int(n - ok.sum()), int(deciding.sum()), np.flatnonzero(ok[deciding]))
+    return kept, Dropped(int(n - ok.sum()), int(deciding.sum()), np.flatnonzero(ok[deciding]),
+                         fields.agent_id[~ok & fields.done].astype(np.int64))
 
 
 def _network_shape(spec: BehaviorSpec) -> tuple:

@@ -102,6 +102,11 @@ class _PendingCall:
         return self._answered.wait(timeout)
 
 
+def _peer_address(peer: str) -> str:
+    """grpcio's peer string ("ipv4:127.0.0.1:5000", "ipv6:[::1]:5000") as host:port."""
+    return peer.split(":", 1)[1] if peer.startswith(("ipv4:", "ipv6:")) else peer
+
+
 class _GrpcioTransport:
     """grpcio's server with a rendezvous: each incoming call is parked in a slot until the
     trainer's thread answers it (or the transport closes, or the client goes away).
@@ -121,6 +126,11 @@ class _GrpcioTransport:
         self._server: grpc.Server | None = None
         self.closed = False
         self.client_gone = False
+        # the peer (grpcio's "ipv4:host:port", one per client connection) whose calls the trainer
+        # takes; another peer's calls are refused while it has not gone, as protos.http2 does, so
+        # a second client on the port cannot inject steps into the session (docs/protocol.md §1.8)
+        self.session: str | None = None
+        self._session_gone = False  # its client dropped a call unanswered: the next peer takes over
 
     def start(self) -> None:
         import grpc
@@ -153,8 +163,15 @@ class _GrpcioTransport:
         with self._cond:
             if self.closed:
                 return _status_message(STATUS_CLOSING).SerializeToString()
-            self._incoming.append(call)
-            self._cond.notify_all()
+            refusal = self._refusal(context.peer())
+            if refusal is None:
+                self._incoming.append(call)
+                self._cond.notify_all()
+        if refusal is not None:  # never reaches the trainer
+            import grpc
+
+            logger.warning("Refused a call from %s: %s", _peer_address(context.peer()), refusal)
+            context.abort(grpc.StatusCode.FAILED_PRECONDITION, refusal)  # raises: the call ends here
         if not context.add_callback(lambda: self._on_rpc_done(call)):
             self._on_rpc_done(call)  # the RPC had already ended
         while not call.wait(1.0):
@@ -166,13 +183,24 @@ class _GrpcioTransport:
             return call.response
         return _status_message(STATUS_CLOSING).SerializeToString()
 
+    def _refusal(self, peer: str) -> str | None:
+        """Why ``peer`` may not make calls (the session is another live client's), or None; the
+        first peer to call becomes the session. Called with ``_cond`` held."""
+        if self.session is None or self._session_gone:
+            self.session, self._session_gone = peer, False
+            return None
+        if peer == self.session:
+            return None
+        return (f"port {self.port} is held by a live training session with {_peer_address(self.session)}; a "
+                "second simulator cannot join it. Give each simulator its own port (--num-envs, --base-port).")
+
     def _on_rpc_done(self, call: _PendingCall) -> None:
         """The RPC ended; if it was never answered the client went away (crash, cancel)."""
         call.finished.set()
         if call.response is None and call.error is None:
             call.abandon()
             with self._cond:
-                self.client_gone = True
+                self.client_gone = self._session_gone = True  # only the session's calls are queued
                 self._cond.notify_all()
 
     # ---- trainer side
@@ -442,6 +470,8 @@ class UnityEndpoint:
                 f"{error}; is it an ML-Agents environment speaking communication API 1.x? "
                 "Rebuild it with the ML-Agents package of Release 22."
             ) from None
+        except ProtocolError as error:  # the codec names the behavior and the fault; say which simulator
+            raise ProtocolError(f"The simulator{self._for()} on port {self.port}: {error}") from None
         status = decoded.message.header.status
         if status != STATUS_OK:
             self._answer(_status_message(STATUS_CLOSING))

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from trainer.ppo.hyperparams import SignalNetwork
+
 
 @dataclass(frozen=True)
 class SACHyperparams:
@@ -26,7 +28,10 @@ class SACHyperparams:
     num_layers: int = 2
     vis_encode_type: str = "simple"
     deterministic: bool = False
-    memory_size: int = 0  # SAC trains without an LSTM (trainer/config/support.py refuses memory)
-    sequence_length: int = 1
+    # network_settings.memory: an LSTM in every network (networks.py); 0 = none
+    memory_size: int = 0
+    sequence_length: int = 64  # with memory: experiences per sampled sequence
     # reward signal name -> (gamma, strength)
     reward_signals: dict[str, tuple[float, float]] = field(default_factory=lambda: {"extrinsic": (0.99, 1.0)})
+    # curiosity / rnd (/ any provider of trainer/ppo/reward_providers.py) -> its own network
+    reward_signal_networks: dict[str, SignalNetwork] = field(default_factory=dict)

@@ -4,7 +4,9 @@ continuous actions and the PPO policy's categorical sampling for discrete branch
 The environment receives tanh(sample) in (-1, 1) (no clipping), and the same squashed action is
 what the replay buffer stores (``continuous_raw``): the Q networks take squashed actions.
 Deterministic acting uses tanh(mu). As for PPO, vector-observation actors on the CPU decide in
-numpy (numpy_net.py says why), drawing noise from the same torch generator.
+numpy (numpy_net.py says why), drawing noise from the same torch generator. With
+network_settings.memory the actor's LSTM state travels with each agent as PPO's does (``act``
+takes and returns memories; ``sample_with_grad`` reads rows as sequences).
 """
 from __future__ import annotations
 
@@ -50,13 +52,21 @@ class SACPolicy(Policy):
         deterministic = deterministic or self.hyperparams.deterministic
         n = len(obs[0])
         log_parts: list[np.ndarray] = []
+        memories_out = None
         if self._numpy_actor is not None:
-            h, _ = self._numpy_actor.hidden(list(obs))
+            h, memories_out = self._numpy_actor.hidden(list(obs), memories)
             mu, logits = self._numpy_actor.heads_of(h, action_mask)
             log_sigma = self._numpy_actor.log_sigma_of(h) if mu is not None else None
         else:
             with torch.inference_mode():
-                encoding = self.actor.network_body(self._to_tensors(obs))
+                if self.memory_size:
+                    memory_in = (torch.zeros((n, self.memory_size)) if memories is None
+                                 else torch.as_tensor(np.asarray(memories, dtype=np.float32)))
+                    encoding, memories_t = self.actor.network_body.forward_memory(
+                        self._to_tensors(obs), memory_in.to(self.device).unsqueeze(0), 1)
+                    memories_out = memories_t[0].cpu().numpy()
+                else:
+                    encoding = self.actor.network_body(self._to_tensors(obs))
                 allowed = allowed_from_mask(action_mask)
                 mu_t, logits_t = self.actor.heads_of(encoding, None if allowed is None else allowed.to(self.device))
                 log_sigma = None if mu_t is None else self.actor.log_sigma_of(encoding, mu_t).cpu().numpy()
@@ -77,14 +87,20 @@ class SACPolicy(Policy):
             discrete=discrete,
             log_probs=log_probs.astype(np.float32, copy=False),
             entropy_of=functools.partial(_entropy, n, log_sigma, branch_probs),
+            memories=memories_out,
         )
 
-    def sample_with_grad(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None, generator: torch.Generator
+    def sample_with_grad(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None, generator: torch.Generator,
+                         memories: torch.Tensor | None = None, sequence_length: int = 1
                          ) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]:
         """For the update, with gradients: (squashed actions [n, c] (reparameterised), their
         log-probs [n, c], the discrete probabilities [n, K] and log(p + eps) [n, K] of every
-        option; None for an absent action kind)."""
-        encoding = self.actor.network_body(obs)
+        option; None for an absent action kind). A recurrent actor reads the n rows as sequences
+        of ``sequence_length`` starting from ``memories`` [1, n / sequence_length, m]."""
+        if memories is not None:
+            encoding, _ = self.actor.network_body.forward_memory(obs, memories, sequence_length)
+        else:
+            encoding = self.actor.network_body(obs)
         mu, logits = self.actor.heads_of(encoding, allowed)
         actions = log_probs = probs = all_log_probs = None
         if mu is not None:

@@ -6,6 +6,11 @@ allocated at the first ``add``. New rows go at ``cursor`` and wrap around, overw
 most recent experiences). Minibatches are drawn uniformly with replacement from a torch generator,
 whose state the trainer keeps in its checkpoint.
 
+With network_settings.memory the trainer adds whole sequences (each trajectory padded to a
+multiple of ``sequence_length``, its pad rows masked) into a ring whose capacity is a multiple of
+it, so every sequence starts at a multiple of ``sequence_length``; ``sample_sequences`` draws
+such starts, as the reference samples its sequences.
+
 The file (``save_replay_buffer``) is an .npz archive of plain arrays, written atomically and read
 with ``allow_pickle=False``: loading it can never run code.
 """
@@ -59,6 +64,14 @@ class ReplayBuffer:
 
     def sample(self, batch_size: int, generator: torch.Generator) -> dict[str, np.ndarray]:
         index = self.sample_indices(batch_size, generator)
+        return {key: value[index] for key, value in self.fields.items()}
+
+    def sample_sequences(self, count: int, sequence_length: int, generator: torch.Generator
+                         ) -> dict[str, np.ndarray]:
+        """``count`` whole sequences of ``sequence_length`` rows (uniform starts at multiples of
+        it, with replacement), concatenated: every field [count * sequence_length, ...]."""
+        starts = torch.randint(0, self.size // sequence_length, (count,), generator=generator).numpy()
+        index = (starts[:, None] * sequence_length + np.arange(sequence_length)).reshape(-1)
         return {key: value[index] for key, value in self.fields.items()}
 
     def chronological(self) -> dict[str, np.ndarray]:

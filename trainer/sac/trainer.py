@@ -6,7 +6,10 @@ One trainer per brain, with the PPOTrainer's interface for the run loop (``proce
 * the policy: networks.Actor, squashed (tanh; state-dependent sigma);
 * a value network V(s) and its target copy (soft-updated with ``tau`` after every step);
 * twin Q networks Q1, Q2 (s, continuous actions) -> a value per discrete option (or one);
-* log entropy coefficients: one for the continuous block, one per discrete branch.
+* log entropy coefficients: one for the continuous block, one per discrete branch;
+* curiosity / rnd learners (trainer/ppo/reward_providers.py, shared with PPO), which reward
+  each sampled minibatch afresh and learn on minibatches of their own, one per
+  ``reward_signal_steps_per_update`` agent steps (as the reference does).
 
 Each gradient step samples ``batch_size`` experiences and steps three Adams (adam.py): the policy
 on its loss, V + Q1 + Q2 on theirs, the log alphas on theirs. Gradient steps keep pace with
@@ -23,13 +26,15 @@ import torch
 from torch import nn
 
 from protos.types import BehaviorSpec
-from trainer.config.support import SAC_REWARD_SIGNALS
+from trainer.config.support import SUPPORTED_REWARD_SIGNALS
 from trainer.errors import ConfigError
 from trainer.ppo import numpy_net
 from trainer.ppo.adam import Adam
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.networks import Critic, NetworkBody
+from trainer.ppo.reward_providers import Experience, make_providers
 from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
+from trainer.ppo.trainer import PPOTrainer
 from trainer.sac import losses
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.policy import SACPolicy
@@ -77,13 +82,11 @@ class SACTrainer:
     def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: SACHyperparams,
                  seed: int, device: str = "cpu"):
         for name in hyperparams.reward_signals:
-            if name not in SAC_REWARD_SIGNALS:
-                raise ConfigError(f"reward_signals.{name} is not supported with SAC yet for behavior "
-                                  f"{brain_name!r}; use only {list(SAC_REWARD_SIGNALS)}")
+            if name not in SUPPORTED_REWARD_SIGNALS:
+                raise ConfigError(f"reward_signals.{name} is not supported yet for behavior "
+                                  f"{brain_name!r}; use only {list(SUPPORTED_REWARD_SIGNALS)}")
         if not hyperparams.reward_signals:
             raise ConfigError(f"behavior {brain_name!r} has no reward_signals; add an extrinsic block")
-        if hyperparams.memory_size:
-            raise ConfigError(f"behavior {brain_name!r}: SAC with network_settings.memory is not implemented yet")
         self.brain_name = brain_name
         self.behavior_spec = behavior_spec
         self.hyperparams = hyperparams
@@ -113,15 +116,28 @@ class SACTrainer:
                                      lr=lr)  # adam.py says why not torch.optim
         self.value_optimizer = Adam(chain(self.critic.parameters(), self.q_network.parameters()), lr=lr)
         self.entropy_optimizer = Adam(self.log_ent_coef.parameters(), lr=lr)
-        self.buffer = ReplayBuffer(hyperparams.buffer_size)
+        # LSTM: experiences are stored and sampled in whole sequences (replay_buffer.py); the
+        # critic's memory at the end of an episode's last trajectory is where its next one starts
+        self.sequence_length = hyperparams.sequence_length if hyperparams.memory_size else 1
+        self._critic_memory: dict[Any, np.ndarray] = {}  # episode -> float32 [memory_size]
+        step = self.sequence_length
+        self.buffer = ReplayBuffer(-(-hyperparams.buffer_size // step) * step)
         self.sample_generator = torch.Generator()
         self.sample_generator.manual_seed(seed + 3)
         self.noise_generator = torch.Generator(device=self.device)  # the update's policy samples
         self.noise_generator.manual_seed(seed + 4)
+        # curiosity / rnd: their own networks and optimizers, seeded after the SAC networks
+        self.providers = make_providers(behavior_spec, hyperparams, seed + 5)
+        self._episode_intrinsic: dict[Any, dict[str, float]] = {}  # episode -> reward sums so far
         self.step = 0
         self.update_steps = 1  # gradient steps taken + 1 (the reference's counter, kept on resume)
+        self.reward_signal_update_steps = 1  # reward-signal learner steps + 1 (likewise)
         self._numpy_critic = numpy_net.NumpyCritic(self.critic) if (
-            numpy_net.supports(self.critic) and self.device.type == "cpu") else None
+            numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
+
+    # the recurrent critic's value estimates run sequence by sequence as PPO's (one implementation)
+    _value_estimates_by_sequence = PPOTrainer._value_estimates_by_sequence
+    _critic_with_memory = PPOTrainer._critic_with_memory
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays) -> list[torch.Tensor]:
@@ -146,27 +162,75 @@ class SACTrainer:
         done = np.zeros(length, dtype=np.float32)  # an interrupted episode bootstraps from its last obs
         done[-1] = float(traj.done and not traj.interrupted)
         fields["done"] = done
-        self.buffer.add(fields)
-        self.step += length
+        stats = self._intrinsic_rewards(traj, fields)
         copy_normalization(self.policy.actor.network_body, self.critic.network_body)
-        if self._numpy_critic is not None:
+        if self.hyperparams.memory_size:
+            values, _, critic_memories = self._value_estimates_by_sequence(traj)
+            fields["memory"] = np.asarray(traj.memories, np.float32)
+            fields["critic_memory"] = critic_memories
+            fields["masks"] = np.ones(length, dtype=np.float32)
+            pad = -length % self.sequence_length  # whole sequences: zeros after the last step, masks 0
+            if pad:
+                fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
+        elif self._numpy_critic is not None:
             values = self._numpy_critic(obs)
         else:
             with torch.inference_mode():
                 values = {k: v.cpu().numpy() for k, v in self.critic(self._tensors(obs)).items()}
-        return {f"Policy/{name.capitalize()} Value": float(np.mean(v)) for name, v in values.items()}
+        self.buffer.add(fields)
+        self.step += length
+        stats.update({f"Policy/{self._stat_name(name)} Value": float(np.mean(v)) for name, v in values.items()})
+        return stats
+
+    def _stat_name(self, signal: str) -> str:
+        provider = self.providers.get(signal)
+        return provider.stat_name if provider is not None else signal.capitalize()
+
+    def _experience(self, columns: dict[str, np.ndarray]) -> Experience:
+        """What a reward provider reads, from replay-buffer columns (a trajectory's or a minibatch)."""
+        n_obs = len(self.behavior_spec.observation_specs)
+        return Experience([columns[_obs_key(i)] for i in range(n_obs)],
+                          [columns[_next_obs_key(i)] for i in range(n_obs)],
+                          columns["continuous_actions"], columns["discrete_actions"], columns.get("masks"))
+
+    def _intrinsic_rewards(self, traj: Trajectory, fields: dict[str, np.ndarray]) -> dict[str, float]:
+        """Each provider's reward x strength summed over the episode, reported as
+        ``Policy/<Name> Reward`` when it ends (the reference's per-episode statistic; the
+        rewards SAC learns from are computed again on every sampled minibatch)."""
+        if not self.providers:
+            return {}
+        stats: dict[str, float] = {}
+        experience = self._experience(fields)
+        sums = self._episode_intrinsic.setdefault(traj.episode, {})
+        for name, provider in self.providers.items():
+            rewards = provider.evaluate(experience) * np.float32(provider.strength)
+            sums[name] = sums.get(name, 0.0) + float(np.sum(rewards))
+            if traj.done:
+                stats[f"Policy/{provider.stat_name} Reward"] = sums[name]
+        if traj.done:
+            self._episode_intrinsic.pop(traj.episode, None)
+        return stats
 
     def forget_episodes(self) -> None:
-        """Nothing is kept per unfinished episode (the run loop calls this after a reset)."""
+        """After a RESET or a simulator restart the unfinished episodes never continue: drop their
+        intrinsic reward sums and critic memories."""
+        self._episode_intrinsic.clear()
+        self._critic_memory.clear()
 
     # ------------------------------------------------------------------ update
     def _updates_due(self) -> bool:
         h = self.hyperparams
         return (self.step - h.buffer_init_steps) / self.update_steps > h.steps_per_update
 
+    def _reward_signal_updates_due(self) -> bool:
+        h = self.hyperparams
+        return bool(self.providers) and (
+            (self.step - h.buffer_init_steps) / self.reward_signal_update_steps > h.reward_signal_steps_per_update)
+
     def ready_to_update(self) -> bool:
         h = self.hyperparams
-        return len(self.buffer) >= h.batch_size and self.step >= h.buffer_init_steps and self._updates_due()
+        return (len(self.buffer) >= h.batch_size and self.step >= h.buffer_init_steps
+                and (self._updates_due() or self._reward_signal_updates_due()))
 
     def learning_rate(self) -> float:
         h = self.hyperparams
@@ -185,23 +249,61 @@ class SACTrainer:
             copy_normalization(actor_body, network.network_body)
         collected: dict[str, list[float]] = {}
         while self._updates_due():
-            batch = self.buffer.sample(self.hyperparams.batch_size, self.sample_generator)
-            for key, value in self.gradient_step(batch).items():
+            for key, value in self.gradient_step(self._sample()).items():
                 collected.setdefault(key, []).append(value)
             self.update_steps += 1
+        # then the reward-signal learners catch up, on minibatches of their own (the reference
+        # updates them after the policy, at their own pace: reward_signal_steps_per_update)
+        while self._reward_signal_updates_due():
+            experience = self._experience(self._sample())
+            for provider in self.providers.values():
+                for key, value in provider.update(experience).items():
+                    collected.setdefault(key, []).append(value)
+            self.reward_signal_update_steps += 1
         result = {key: float(np.mean(values)) for key, values in collected.items()}
         result["Policy/Learning Rate"] = learning_rate
         return result
 
+    def _sample(self) -> dict[str, np.ndarray]:
+        """A minibatch of ``batch_size`` rows: single experiences, or with memory whole sequences
+        (batch_size // sequence_length of them, at least one, as the reference)."""
+        size, step = self.hyperparams.batch_size, self.sequence_length
+        if step == 1:
+            return self.buffer.sample(size, self.sample_generator)
+        return self.buffer.sample_sequences(max(size // step, 1), step, self.sample_generator)
+
     def gradient_step(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
-        """One SAC step on a sampled minibatch (numpy columns of the replay buffer)."""
+        """One SAC step on a sampled minibatch (numpy columns of the replay buffer).
+
+        With memory the rows are sequences: the policy starts each from its stored memory, V
+        from the stored critic memory, Q1 and Q2 from zero (the reference's choice: they have
+        no memory at inference), and the target V from V's memory one step in; the losses
+        average over the unpadded rows only."""
         spec = self.behavior_spec.action_spec
         n_obs = len(self.behavior_spec.observation_specs)
         t = {key: torch.as_tensor(value, device=self.device) for key, value in batch.items()}
         obs = [t[_obs_key(i)] for i in range(n_obs)]
         next_obs = [t[_next_obs_key(i)] for i in range(n_obs)]
         allowed = (~t["action_masks"]).float() if self.branches else None
-        actions, cont_log_probs, probs, all_log_probs = self.policy.sample_with_grad(obs, allowed, self.noise_generator)
+        step = self.sequence_length
+        if self.hyperparams.memory_size:
+            memories = t["memory"][::step].unsqueeze(0)
+            value_memories = t["critic_memory"][::step].unsqueeze(0)
+            q_memories = torch.zeros_like(value_memories)
+
+            def run(network, inputs, actions=None, start=q_memories):
+                return network.forward_memory(inputs, start, step, actions)[0]
+
+            with torch.no_grad():
+                next_memories = self.critic.forward_memory([o[::step] for o in obs], value_memories, 1)[1]
+        else:
+            memories = value_memories = next_memories = None
+
+            def run(network, inputs, actions=None, start=None):
+                return network(inputs, actions)
+
+        actions, cont_log_probs, probs, all_log_probs = self.policy.sample_with_grad(
+            obs, allowed, self.noise_generator, memories, step)
         stored = t["continuous_actions"] if spec.continuous_size else None
         q1, q2 = self.q_network.q1_network, self.q_network.q2_network
         # Q1 of the policy's own actions with Q1's parameters held constant: the policy loss's
@@ -209,22 +311,41 @@ class SACTrainer:
         for p in self._q1_params:
             p.requires_grad_(False)
         try:
-            q1_policy = q1(obs, actions)
+            q1_policy = run(q1, obs, actions)
         finally:
             for p in self._q1_params:
                 p.requires_grad_(True)
         with torch.no_grad():
-            q2_policy = q2(obs, actions)
-            next_values = self.target_network(next_obs)
-        q1_taken, q2_taken = q1(obs, stored), q2(obs, stored)
-        values = self.critic(obs)
+            q2_policy = run(q2, obs, actions)
+            next_values = run(self.target_network, next_obs, start=next_memories)
+        q1_taken, q2_taken = run(q1, obs, stored), run(q2, obs, stored)
+        values = run(self.critic, obs, start=value_memories)
+        names = list(self.hyperparams.reward_signals)
+        experience = self._experience(batch) if self.providers else None
+        rewards = {}
+        for name in names:
+            provider = self.providers.get(name)
+            strength = self.hyperparams.reward_signals[name][1]
+            rewards[name] = (t["rewards"] * strength if provider is None else  # the provider's current reward
+                             torch.as_tensor(provider.evaluate(experience) * np.float32(strength), device=self.device))
+        if self.hyperparams.memory_size:  # from here on, the unpadded rows only
+            keep = t["masks"] > 0
+
+            def real(x):
+                return None if x is None else {k: v[keep] for k, v in x.items()} if isinstance(x, dict) else x[keep]
+
+            q1_policy, q2_policy, next_values, q1_taken, q2_taken, values, rewards = map(
+                real, (q1_policy, q2_policy, next_values, q1_taken, q2_taken, values, rewards))
+            cont_log_probs, probs, all_log_probs = map(real, (cont_log_probs, probs, all_log_probs))
+            t = {key: t[key][keep] for key in ("done", "discrete_actions")}
         alpha_c = self.log_ent_coef.continuous.exp().detach() if spec.continuous_size else None
         alpha_d = self.log_ent_coef.discrete.exp().detach() if self.branches else None
-        names = list(self.hyperparams.reward_signals)
         q1_losses, q2_losses, value_losses = [], [], []
         for name in names:
-            gamma, strength = self.hyperparams.reward_signals[name]
-            backup = losses.q_backup(t["rewards"] * strength, t["done"], next_values[name], gamma)
+            gamma = self.hyperparams.reward_signals[name][0]
+            provider = self.providers.get(name)
+            backup = losses.q_backup(rewards[name], t["done"], next_values[name], gamma,
+                                     use_dones=provider is None or not provider.ignore_done)
             taken1, taken2 = q1_taken[name], q2_taken[name]
             if self.branches:
                 discrete = t["discrete_actions"]
@@ -281,12 +402,14 @@ class SACTrainer:
             "Optimizer:value_optimizer": self.value_optimizer.state_dict(),
             "Optimizer:entropy_optimizer": self.entropy_optimizer.state_dict(),
             "Optimizer:entropy_coefficients": self.log_ent_coef.state_dict(),
-            "SAC": {"update_steps": torch.tensor(self.update_steps, dtype=torch.int64)},
+            "SAC": {"update_steps": torch.tensor(self.update_steps, dtype=torch.int64),
+                    "reward_signal_update_steps": torch.tensor(self.reward_signal_update_steps, dtype=torch.int64)},
             "RNG": {
                 "policy_sampling": self.policy.generator.get_state(),
                 "replay_sampling": self.sample_generator.get_state(),
                 "update_noise": self.noise_generator.get_state(),
             },
+            **{key: value for provider in self.providers.values() for key, value in provider.state_dict().items()},
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -305,6 +428,16 @@ class SACTrainer:
         sac = state.get("SAC")
         self.update_steps = (int(sac["update_steps"]) if sac is not None
                              else int(max(1, self.step / self.hyperparams.steps_per_update)))
+        self.reward_signal_update_steps = (
+            int(sac["reward_signal_update_steps"]) if sac is not None and "reward_signal_update_steps" in sac
+            else int(max(1, self.step / self.hyperparams.reward_signal_steps_per_update)))
+        for name, provider in self.providers.items():
+            keys = provider.state_dict().keys()
+            if all(key in state for key in keys):
+                provider.load_state_dict(state)
+            else:
+                logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
+                               name, ", ".join(sorted(k for k in keys if k not in state)))
         rng = state.get("RNG")
         if rng is not None:
             self.policy.generator.set_state(rng["policy_sampling"])
@@ -315,6 +448,7 @@ class SACTrainer:
         """--initialize-from: the weights stay, the step and update counters start over."""
         self.step = 0
         self.update_steps = 1
+        self.reward_signal_update_steps = 1
 
     def save_replay_buffer(self, path: str) -> None:
         self.buffer.save(path)
