@@ -20,7 +20,7 @@ from trainer.artifacts.atomic import atomic_copy
 from trainer import crash_points
 from trainer.artifacts.checkpoints import CheckpointError, checkpoint_step, load_checkpoint, save_checkpoint
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
-from trainer.errors import UserError
+from trainer.errors import ConfigError, UserError
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.trainer import PPOTrainer
@@ -64,7 +64,8 @@ def signal_networks(settings) -> dict[str, SignalNetwork]:
         name: SignalNetwork(learning_rate=rs.learning_rate, hidden_units=rs.network_settings.hidden_units,
                             num_layers=rs.network_settings.num_layers,
                             normalize=rs.network_settings.normalize,
-                            vis_encode_type=rs.network_settings.vis_encode_type)
+                            vis_encode_type=rs.network_settings.vis_encode_type,
+                            use_actions=getattr(rs, "use_actions", False), use_vail=getattr(rs, "use_vail", False))
         for name, rs in settings.reward_signals.items() if name != "extrinsic"
     }
 
@@ -94,13 +95,44 @@ def make_trainer(brain: str, spec: BehaviorSpec, settings, seed: int, device: st
     if settings.trainer_type == "sac":
         from trainer.sac.trainer import SACTrainer
 
-        return SACTrainer(brain, spec, sac_hyperparams_from_settings(settings), seed=seed, device=device)
-    if settings.trainer_type == "poca":
+        trainer = SACTrainer(brain, spec, sac_hyperparams_from_settings(settings), seed=seed, device=device)
+    elif settings.trainer_type == "poca":
         from trainer.poca.trainer import POCATrainer
 
-        return POCATrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device)
-    return PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
-                      use_numpy_update=use_numpy_update)
+        trainer = POCATrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device)
+    else:
+        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
+                             use_numpy_update=use_numpy_update)
+    attach_demonstrations(trainer, brain, spec, settings, seed)
+    return trainer
+
+
+def attach_demonstrations(trainer, brain: str, spec: BehaviorSpec, settings, seed: int) -> None:
+    """behavioral_cloning's learner and GAIL's expert data, from their demo_path (read once per
+    path); ConfigError (exit 2) if a demonstration does not fit the behavior."""
+    from trainer.demonstrations import demo_paths, load_demonstrations
+
+    loaded = {}
+    for key, path in demo_paths(settings):
+        if path not in loaded:
+            loaded[path] = load_demonstrations(path, spec, f"behaviors.{brain}.{key}")
+    bc = settings.behavioral_cloning
+    gail = settings.reward_signals.get("gail")
+    provider = getattr(trainer, "providers", {}).get("gail")
+    # a trainer that would ignore them (it has no hook for cloning, no GAIL provider) must not train quietly without
+    for wanted, missing, key in ((bc, not hasattr(trainer, "behavioral_cloning"), "behavioral_cloning"),
+                                 (gail, provider is None, "reward_signals.gail")):
+        if wanted is not None and missing:
+            raise ConfigError(f"behaviors.{brain}.{key}: not implemented for trainer_type "
+                              f"{settings.trainer_type} yet; remove it or use trainer_type ppo")
+    if bc is not None:
+        from trainer.behavioral_cloning import BehavioralCloning
+
+        h = settings.hyperparameters
+        trainer.behavioral_cloning = BehavioralCloning(trainer.policy, bc, loaded[bc.demo_path], h.learning_rate,
+                                                       h.batch_size, seed + 7)
+    if gail is not None:
+        provider.set_demonstrations(loaded[gail.demo_path])
 
 
 @dataclass

@@ -7,6 +7,8 @@
     unity-stub-env --list
     unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
                    [--evaluate-option KEY=VALUE]
+    unity-stub-env --task basic|ball3d|... --record-demo OUT.demo --policy MODEL.onnx|scripted
+                   [--demo-steps N] [--seed S] [--num-areas N]     (see unity_stub_env.record_demo)
     unity-stub-env hmm train CORPUS -o MODEL [--states N --restarts R --method fast|baum-welch --seed S]
     unity-stub-env hmm sample MODEL -n N --length L [--seed S]      (see unity_stub_env.hmm)
     unity-stub-env creature --kind quadruped|biped|lsystem --seed S [--mjcf OUT.xml]
@@ -77,6 +79,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--evaluate-option", dest="evaluate_options", action="append", default=[],
                         metavar="KEY=VALUE", help="--evaluate: a task option for every policy, e.g. mimic's "
                                                   "residual=0.25 for a policy trained with that residual; repeatable")
+    parser.add_argument("--record-demo", metavar="OUT.demo", default=None,
+                        help="record a demonstration of --task in Unity's .demo format (no trainer) with "
+                             "--policy, for behavioral_cloning and GAIL")
+    parser.add_argument("--policy", default=None, metavar="MODEL.onnx|scripted",
+                        help="--record-demo: a trained .onnx (deterministic actions) or 'scripted' (the "
+                             "task's hand-written expert: basic, ball3d)")
+    parser.add_argument("--demo-steps", type=int, default=None, metavar="N",
+                        help="--record-demo: record whole episodes until the file holds N steps (default 1000)")
     parser.add_argument("--write-launcher", metavar="DIR", default=None,
                         help="write DIR/Stub<Task>.x86_64, a Unity-build-like launcher of --task that "
                              "mlagents-learn --env DIR/Stub<Task> (or UnityEnvironment) can start, and exit")
@@ -158,6 +168,15 @@ def main(argv: list[str] | None = None) -> int:
 
         return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path,
                               args.evaluate_options)
+    if args.record_demo is not None:
+        if len(args.tasks) != 1 or args.mirror is not None or args.policy is None:
+            print("unity-stub-env: --record-demo takes exactly one --task and --policy MODEL.onnx|scripted.",
+                  file=sys.stderr)
+            return 2
+        from unity_stub_env.record_demo import run as run_recording
+
+        return run_recording(args.tasks[0], args.record_demo, args.policy, args.demo_steps, args.seed or 0,
+                             args.num_areas)
     if args.write_launcher is not None:
         spec = ["--spec", os.path.abspath(args.spec)] if args.mirror is not None else []
         path = write_player_launcher(args.write_launcher, args.tasks, extra_args=spin_wait_args(

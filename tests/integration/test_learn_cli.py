@@ -123,9 +123,9 @@ def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
     elif case == "missing_yaml":
         expect = "c.yaml"
     elif case == "unsupported_feature":  # refused before a simulator is launched, not dropped quietly
-        cfg.write_text("behaviors:\n  Basic:\n    trainer_type: ppo\n    reward_signals:\n"
-                       "      extrinsic: {}\n      gail: {demo_path: expert.demo}\n")
-        expect = "'behaviors.Basic.reward_signals.gail'"
+        cfg.write_text("behaviors:\n  Basic:\n    trainer_type: poca\n    network_settings:\n"
+                       "      memory: {memory_size: 16, sequence_length: 4}\n")
+        expect = "'behaviors.Basic.network_settings.memory'"
     elif case == "unknown_stub_task":
         cfg.write_text("behaviors: {}\n")
         args[2] = "stub:nosuch"

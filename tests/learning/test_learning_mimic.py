@@ -2,13 +2,16 @@
 real gRPC, 16 ragdolls (2 areas), a fixed seed and a bounded number of steps.
 
 The thesis' configuration (2 x 1024, up to 5e7 steps) is a bench run (bench/README.md); this test
-uses a small network with a higher learning rate on the standing motion with the spec's absolute
-PD targets. A fresh policy aims every axis at the middle of its range (a deep crouch) and falls
-within ~0.8 s; in 64,000 steps it learns to stay up longer. Measured (seed 1, 8 summaries of
-8,000 steps): mean return 4.80 at the first summary and 5.56 over the last three (5.35..5.75),
-episode length 39.7 -> 44.4 decisions. Thresholds: the last three summaries' mean return beats the
-first by >= 0.4 (a summary's standard error is ~0.07: ~200 episodes of std ~1.0 each) and the mean
-episode length grows by >= 2 decisions.
+uses a small network with a higher learning rate on the standing motion with the default absolute
+PD targets (action 0 = the standing pose). A fresh policy's mean action stands, but its exploration
+noise (std 1 in action units: random PD targets over the whole range) topples it within ~0.85 s;
+in 64,000 steps it learns to stay up longer and closer to the pose. Measured (seed 1, 8 summaries of
+8,000 steps): mean return 7.23 at the first summary and 9.37 over the last three (8.81..9.73),
+episode length 42.5 -> 47.8 decisions, r_r 0.076 -> 0.121. With the earlier map (action 0 = the
+middle of each range) the same run went 4.80 -> 5.56 with r_r ~0.03 throughout. Thresholds: the last
+three summaries' mean return beats the first by >= 1.5 (a summary's standard error is ~0.1: ~200
+episodes of std ~1.5 each), the mean episode length grows by >= 3 decisions and the last summary's
+r_r beats the first by >= 0.03.
 """
 from __future__ import annotations
 
@@ -51,6 +54,8 @@ def test_mimic_stays_up_longer_after_64k_steps(tmp_path, env_no_proxy):
     length = [e.value for e in acc.Scalars("Environment/Episode Length")]
     assert reward[-1][0] == 64000 and len(reward) == 8
     last = sum(value for _, value in reward[-3:]) / 3
-    assert last >= reward[0][1] + 0.4, reward
-    assert sum(length[-3:]) / 3 >= length[0] + 2.0, length
-    assert len(acc.Scalars("Mimic/r_r")) == 8 and (tmp_path / "results" / "m" / "Mimic.onnx").exists()
+    assert last >= reward[0][1] + 1.5, reward
+    assert sum(length[-3:]) / 3 >= length[0] + 3.0, length
+    pose = [e.value for e in acc.Scalars("Mimic/r_r")]
+    assert len(pose) == 8 and pose[-1] >= pose[0] + 0.03, pose
+    assert (tmp_path / "results" / "m" / "Mimic.onnx").exists()

@@ -144,22 +144,32 @@ def test_rsi_puts_the_ragdoll_at_the_reference_pose_and_velocity(motion):
     assert (no_rsi.frame == 0).all()
 
 
-def test_the_pd_controllers_alone_hold_the_reference_but_the_middle_of_the_ranges_falls():
+def test_the_pd_controllers_alone_hold_the_reference_and_zero_actions_hold_the_neutral_pose():
     tracking = run_trials(lambda obs: np.zeros((len(obs), 26)), motion=2, trials=N, seed=0, residual=1.0)
     assert tracking["balance_kept"] == 1.0 and tracking["r_r"] > 0.9
-    middle = run_trials(lambda obs: np.zeros((len(obs), 26)), motion=0, trials=N, seed=0)
-    assert middle["balance_kept"] == 0.0 and middle["mean_seconds"] < 2.0
+    # absolute targets: zero actions aim every axis at 0 rad, the standing pose, which the PD holds;
+    # the squat's reference moves away from it (measured r_r 0.29)
+    neutral = run_trials(lambda obs: np.zeros((len(obs), 26)), motion=0, trials=N, seed=0)
+    assert neutral["balance_kept"] == 1.0 and neutral["r_r"] > 0.99
+    squat = run_trials(lambda obs: np.zeros((len(obs), 26)), motion=2, trials=N, seed=0)
+    assert squat["balance_kept"] == 1.0 and squat["r_r"] < 0.5
 
 
 def test_actions_map_onto_the_limits_or_around_the_reference():
     task = _task(motion=1, rsi=0)
     action = np.tile(np.linspace(-1, 1, 26), (N, 1))
     action[:, :3] = (-1.0, 0.0, 1.0)
+    action[:, 3:6] = (-0.5, 0.5, 0.25)
+    action[:, JOINTS.index("knee_r")] = -0.7
     task.step(action, NO_DISCRETE)
     ctrl = task.data.ctrl[task.actuator]
     np.testing.assert_allclose(ctrl[:, 0], math.radians(-30))  # waist_x low
-    np.testing.assert_allclose(ctrl[:, 1], 0.0, atol=1e-12)  # waist_y middle of -35..35
+    np.testing.assert_allclose(ctrl[:, 1], 0.0, atol=1e-12)  # waist_y: 0 -> the neutral 0 rad
     np.testing.assert_allclose(ctrl[:, 2], math.radians(45))  # waist_z high
+    # piecewise linear about 0 rad: neck_x -60..50 at -0.5 -> -30 deg, neck_y -45..45 at 0.5 -> 22.5,
+    # neck_z -80..80 at 0.25 -> 20; the knee 0..150 has no negative half: -0.7 -> 0 deg
+    np.testing.assert_allclose(np.degrees(ctrl[:, 3:6]), np.tile([-30.0, 22.5, 20.0], (N, 1)))
+    np.testing.assert_allclose(ctrl[:, JOINTS.index("knee_r")], 0.0, atol=1e-12)
     residual = _task(motion=1, rsi=0, residual=0.5)
     residual.step(np.zeros((N, 26)), NO_DISCRETE)
     np.testing.assert_allclose(residual.data.ctrl[residual.actuator], np.tile(residual.ref.joints[residual.ref.offset[1] + 1], (N, 1)))

@@ -30,7 +30,7 @@ def test_plain_ppo_config_is_supported(tmp_path):
     check_supported(opts)  # no error
 
 
-def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
+def test_imitation_self_play_memory_and_intrinsic_signals_are_all_supported_with_ppo(tmp_path):
     opts = options(tmp_path, """
         behaviors:
           Striker:
@@ -46,14 +46,9 @@ def test_every_unsupported_feature_is_named_with_its_path(tmp_path):
           Goalie:
             trainer_type: ppo
     """)
-    assert [key for key, _ in unsupported(opts.behaviors["Striker"])] == [
-        "reward_signals.gail", "behavioral_cloning"]  # self_play is trained (trainer/selfplay.py)
+    assert unsupported(opts.behaviors["Striker"]) == []  # gail, behavioral_cloning, self_play: all trained
     assert unsupported(opts.behaviors["Goalie"]) == []
-    with pytest.raises(ConfigError) as info:
-        check_supported(opts)
-    message = str(info.value)
-    assert message.count("'behaviors.Striker.") == 2 and "Goalie" not in message
-    assert "self_play" not in message
+    check_supported(opts)  # no error
 
 
 def test_sac_is_supported_with_memory_and_intrinsic_signals(tmp_path):
@@ -73,11 +68,11 @@ def test_sac_is_supported_with_memory_and_intrinsic_signals(tmp_path):
 def test_default_settings_are_checked_too(tmp_path):
     opts = options(tmp_path, """
         default_settings:
-          trainer_type: ppo
-          reward_signals: {gail: {demo_path: a.demo}}
+          trainer_type: poca
+          network_settings: {memory: {memory_size: 16, sequence_length: 4}}
         behaviors: {}
     """)
-    with pytest.raises(ConfigError, match=r"'default_settings\.reward_signals\.gail'"):
+    with pytest.raises(ConfigError, match=r"'default_settings\.network_settings\.memory'"):
         check_supported(opts)
 
 

@@ -155,15 +155,24 @@ def test_onnx_recurrent_in_and_out_match_torch():
     assert (result["discrete_actions"] != 1).all()  # the masked option is never sampled
 
 
+RECALL_SPEC = BehaviorSpec((ObservationSpec((2,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "v"),),
+                           ActionSpec(0, (2,)))
+
+
 def recall_success(memory_size: int, iterations: int) -> float:
     """A cue (+-1) shown only on the first of 4 steps; reward 1 if the last action names it.
     Without memory the last step sees only zeros: 50 % at best. Returns the final success rate."""
     hyper = PPOHyperparams(hidden_units=16, num_layers=1, memory_size=memory_size, sequence_length=4, batch_size=32,
                            buffer_size=120, num_epoch=3, learning_rate=3e-3, beta=1e-3, max_steps=10**6,
                            learning_rate_schedule="constant", reward_signals={"extrinsic": (0.99, 1.0)})
-    spec = BehaviorSpec((ObservationSpec((2,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "v"),),
-                        ActionSpec(0, (2,)))
-    trainer = PPOTrainer("Recall", spec, hyper, seed=11)
+    trainer = PPOTrainer("Recall", RECALL_SPEC, hyper, seed=11)
+    return play_recall(trainer, memory_size, iterations)
+
+
+def play_recall(trainer, memory_size: int, iterations: int) -> float:
+    """Rounds of the recall task for any trainer (PPO here, SAC in test_sac_memory.py): 16 agents
+    per round, each round's 4-step episodes handed to the trainer, an update when it is ready.
+    Returns the success rate of the last 10 rounds."""
     rng, agents, results = np.random.default_rng(5), 16, []
     for it in range(iterations):
         cue = rng.integers(0, 2, agents)

@@ -143,5 +143,5 @@ def test_runs_are_repeatable_and_resumable_through_a_checkpoint(tmp_path, normal
 
 
 def test_unsupported_reward_signal_is_a_config_error():
-    with pytest.raises(ConfigError, match="reward_signals.gail is not supported"):
-        PPOTrainer("Ball", SPEC, replace(HYPER, reward_signals={"gail": (0.99, 0.02)}), seed=0)
+    with pytest.raises(ConfigError, match="reward_signals.magic is not supported"):
+        PPOTrainer("Ball", SPEC, replace(HYPER, reward_signals={"magic": (0.99, 0.02)}), seed=0)

@@ -14,6 +14,7 @@ from trainer.ppo.buffer import Trajectory
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.replay_buffer import ReplayBuffer
 from trainer.sac.trainer import SACTrainer
+from tests.unit.test_lstm import RECALL_SPEC, play_recall
 
 SPEC = BehaviorSpec((ObservationSpec((3,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "v"),),
                     ActionSpec(2, (3,)))
@@ -150,34 +151,8 @@ def recall_success(memory_size: int, iterations: int) -> float:
     hyper = SACHyperparams(hidden_units=16, num_layers=1, memory_size=memory_size, sequence_length=4, batch_size=64,
                            buffer_size=2000, learning_rate=3e-3, steps_per_update=16.0, init_entcoef=0.05,
                            reward_signals={"extrinsic": (0.99, 1.0)})
-    spec = BehaviorSpec((ObservationSpec((2,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "v"),),
-                        ActionSpec(0, (2,)))
-    trainer = SACTrainer("Recall", spec, hyper, seed=11)
-    rng, agents, results = np.random.default_rng(5), 16, []
-    for it in range(iterations):
-        cue = rng.integers(0, 2, agents)
-        obs = np.zeros((4, agents, 2), np.float32)
-        obs[0, :, 0], obs[0, :, 1] = 2.0 * cue - 1.0, 1.0
-        memory = np.zeros((agents, memory_size), np.float32)
-        steps = []
-        for t in range(4):
-            out = trainer.policy.act([obs[t]], None, memories=memory if memory_size else None)
-            steps.append((out, memory))
-            memory = out.memories
-        correct = steps[-1][0].discrete[:, 0] == cue
-        results.append(correct.mean())
-        for a in range(agents):
-            trainer.process_trajectory(Trajectory(
-                obs=[obs[:, a]], next_obs=[np.zeros(2, np.float32)],
-                rewards=np.array([0, 0, 0, float(correct[a])], np.float32),
-                continuous_actions=np.zeros((4, 0), np.float32),
-                discrete_actions=np.stack([s[0].discrete[a] for s in steps]),
-                log_probs=np.stack([s[0].log_probs[a] for s in steps]), action_masks=None, done=True,
-                interrupted=False, episode=(it, a),
-                memories=np.stack([s[1][a] for s in steps]) if memory_size else None))
-        if trainer.ready_to_update():
-            trainer.update()
-    return float(np.mean(results[-10:]))
+    trainer = SACTrainer("Recall", RECALL_SPEC, hyper, seed=11)
+    return play_recall(trainer, memory_size, iterations)
 
 
 def test_memory_solves_a_task_that_needs_it():

@@ -14,7 +14,7 @@ from trainer.errors import ConfigError
 
 # reward signals the trainers compute (trainer/ppo/trainer.py and trainer/sac/trainer.py check
 # the same list: both take every provider of trainer/ppo/reward_providers.py)
-SUPPORTED_REWARD_SIGNALS = ("extrinsic", "curiosity", "rnd")
+SUPPORTED_REWARD_SIGNALS = ("extrinsic", "curiosity", "rnd", "gail")
 
 
 def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
@@ -27,8 +27,6 @@ def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
         if name not in SUPPORTED_REWARD_SIGNALS:
             found.append((f"reward_signals.{name}",
                           f"remove it; supported reward signals: {', '.join(SUPPORTED_REWARD_SIGNALS)}"))
-    if ts.behavioral_cloning is not None:
-        found.append(("behavioral_cloning", "remove the block (no imitation learning yet)"))
     return found
 
 

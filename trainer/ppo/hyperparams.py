@@ -17,6 +17,8 @@ class SignalNetwork:
     num_layers: int = 2
     normalize: bool = False
     vis_encode_type: str = "simple"
+    use_actions: bool = False  # gail: the discriminator also sees the actions and done flags
+    use_vail: bool = False  # gail: variational bottleneck
 
 
 @dataclass(frozen=True)

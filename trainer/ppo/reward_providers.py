@@ -1,4 +1,4 @@
-"""Intrinsic reward signals: curiosity (ICM) and random network distillation (RND).
+"""Intrinsic reward signals: curiosity (ICM), random network distillation (RND) and GAIL.
 
 Each provider turns experiences into one reward per step (``evaluate``, before ``strength``),
 learns from a minibatch (``update``, its own Adam) and has a value head of its own in the
@@ -20,12 +20,14 @@ named alike). Behaviour as in ML-Agents Release 22 (docs/ppo.md §10):
 * Statistics: ``Losses/Curiosity Forward Loss``, ``Losses/Curiosity Inverse Loss``,
   ``Losses/RND Loss`` per update; the trainer adds ``Policy/<Name> Reward`` per episode and
   ``Policy/<Name> Value Estimate`` per trajectory, with ``<Name>`` = Curiosity | Rnd.
+* GAIL: see ``GAILProvider``.
 * Checkpoint keys as the reference names its modules: ``Module:Curiosity``, ``Module:RND-pred``,
-  ``Module:RND-target``; plus each provider's optimizer state.
+  ``Module:RND-target``, ``Module:GAIL``; plus each provider's optimizer state.
 """
 from __future__ import annotations
 
 import dataclasses
+import logging
 from typing import Any, Sequence
 
 import numpy as np
@@ -38,6 +40,8 @@ from trainer.ppo.layers import KAIMING_NORMAL, Swish, linear_layer
 from trainer.ppo.losses import masked_mean
 from trainer.ppo.networks import NetworkBody
 from protos.types import ActionSpec, BehaviorSpec
+
+logger = logging.getLogger("mlagents_like")
 
 CURIOSITY_HIDDEN = 256  # the inverse and forward models' hidden width (fixed in the reference)
 FORWARD_WEIGHT = 0.2  # loss = LOSS_MULTIPLIER * (0.2 forward + 0.8 inverse)
@@ -65,14 +69,16 @@ def _one_hot(discrete: torch.Tensor, branches: Sequence[int]) -> torch.Tensor:
 class Experience:
     """The columns a provider reads: observations [n, ...] per input, the next observations,
     the raw continuous actions [n, c] and the discrete actions [n, B] (numpy or torch), and for
-    recurrent minibatches the masks [n] that are 0 on sequence padding."""
+    recurrent minibatches the masks [n] that are 0 on sequence padding; ``done`` [n] (1 where the
+    step ended its episode) for the providers that read it (``needs_done``)."""
 
-    def __init__(self, obs, next_obs, continuous, discrete, masks=None) -> None:
+    def __init__(self, obs, next_obs, continuous, discrete, masks=None, done=None) -> None:
         self.obs = [_tensor(o) for o in obs]
         self.next_obs = None if next_obs is None else [_tensor(o) for o in next_obs]
         self.continuous = _tensor(continuous)
         self.discrete = _tensor(discrete, torch.int64)
         self.masks = None if masks is None else _tensor(masks)
+        self.done = None if done is None else _tensor(done)
 
 
 class CuriosityNetwork(nn.Module):
@@ -214,7 +220,184 @@ class RNDProvider:
         self.optimizer.load_state_dict(state["Optimizer:RND"])
 
 
-PROVIDERS = {"curiosity": CuriosityProvider, "rnd": RNDProvider}
+# --------------------------------------------------------------------------- GAIL
+GAIL_Z_SIZE = 128  # VAIL's bottleneck width
+GAIL_GRADIENT_PENALTY = 10.0
+GAIL_VAIL_ALPHA = 0.0005  # VAIL's beta step
+GAIL_MUTUAL_INFORMATION = 0.5  # VAIL's information constraint I_c
+GAIL_EPSILON = 1e-7
+CONTINUOUS_CLIP = 3.0  # PPO's env actions: clamp(a, -3, 3) / 3 (trainer/ppo/policy.py)
+
+
+class DiscriminatorNetwork(nn.Module):
+    """D(s[, a, done]) in (0, 1): how much a step looks like the demonstration's.
+
+    A network body over the observations (the signal's network_settings); with ``use_actions``
+    the actions (continuous, then one-hot branches) and the done flag join the encoded
+    observations before the hidden layers. With ``use_vail`` a Gaussian code z of 128 (mean
+    Linear(hidden, 128), a learned sigma) sits between the body and the estimator
+    Sigmoid(Linear(., 1))."""
+
+    def __init__(self, spec: BehaviorSpec, hyperparams: PPOHyperparams, network: SignalNetwork) -> None:
+        super().__init__()
+        a = spec.action_spec
+        self.action_spec = a
+        self.use_actions, self.use_vail = network.use_actions, network.use_vail
+        extra = a.continuous_size + sum(a.discrete_branches) + 1 if self.use_actions else 0
+        self.encoder = NetworkBody(spec.observation_specs, _body_hyperparams(hyperparams, network), extra)
+        size = self.encoder.output_size
+        if self.use_vail:
+            self.z_sigma = nn.Parameter(torch.ones(GAIL_Z_SIZE))
+            self.z_mu_layer = linear_layer(size, GAIL_Z_SIZE, KAIMING_NORMAL, 0.1)
+            self.beta = nn.Parameter(torch.tensor(0.0), requires_grad=False)  # adapted by the update, saved
+            size = GAIL_Z_SIZE
+        self.estimator = nn.Sequential(linear_layer(size, 1, gain=0.2), nn.Sigmoid())
+
+    def action_input(self, continuous: torch.Tensor, discrete: torch.Tensor, done: torch.Tensor) -> torch.Tensor:
+        parts = []
+        if self.action_spec.continuous_size:
+            parts.append(continuous)
+        if self.action_spec.discrete_branches:
+            parts.append(_one_hot(discrete, self.action_spec.discrete_branches))
+        return torch.cat([*parts, done.reshape(-1, 1)], dim=1)
+
+    def estimate(self, obs: list[torch.Tensor], actions: torch.Tensor | None, noise: torch.Tensor | None
+                 ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(D [n], the code's mean [n, 128] or None); ``noise`` [n, 128] samples the VAIL code."""
+        hidden = self.encoder(obs, actions)
+        z_mu = None
+        if self.use_vail:
+            z_mu = self.z_mu_layer(hidden)
+            hidden = z_mu if noise is None else z_mu + noise * self.z_sigma
+        return self.estimator(hidden).squeeze(1), z_mu
+
+
+class GAILProvider:
+    """Generative adversarial imitation: a discriminator learns to tell the policy's steps from a
+    demonstration's, and the policy is rewarded for steps it takes for the demonstration's.
+    Behaviour as in ML-Agents Release 22 (docs/demonstrations.md):
+
+    * reward (before ``strength``) = -log(1 - D (1 - 1e-7)), D without VAIL noise; returns end at
+      a terminal step (``done`` is not ignored);
+    * per PPO minibatch of n policy steps, n demonstration experiences drawn with replacement;
+      the body's normaliser (when the signal's network_settings normalise) is updated with them;
+      loss = -mean(log(D_expert + 1e-7) + log(1 - D_policy + 1e-7)) + 10 x the gradient penalty
+      mean((|grad D(x~)| - 1)^2) at x~ = a random mix u x_policy + (1 - u) x_expert, the gradient
+      taken with respect to the first observation as the reference does; with VAIL the KL of
+      the codes plus beta (KL - 0.5), beta <- max(0, beta + 0.0005 (KL - 0.5)) after each step;
+    * statistics ``Losses/GAIL Loss``, ``Policy/GAIL Policy Estimate``, ``Policy/GAIL Expert
+      Estimate``, ``Policy/GAIL Grad Mag Loss``, with VAIL ``Policy/GAIL Beta`` and ``Losses/GAIL
+      KL Loss``; the trainer adds ``Policy/Gail Reward`` and ``Policy/Gail Value Estimate``.
+
+    One deliberate difference: the demonstration's continuous actions are what the environment
+    received (in [-1, 1]); the reference compares them with the policy's raw Gaussian samples,
+    which the environment receives as clamp(a, -3, 3) / 3, so a discriminator with
+    ``use_actions`` can tell the two apart by scale alone. Here the policy's actions go through
+    the same clamp and division first.
+    """
+
+    stat_name = "Gail"  # the reference: "GAIL".capitalize()
+    ignore_done = False
+    needs_next_obs = False
+
+    def __init__(self, spec: BehaviorSpec, hyperparams: PPOHyperparams, strength: float,
+                 network: SignalNetwork) -> None:
+        self.strength = float(strength)
+        self.network = DiscriminatorNetwork(spec, hyperparams, network)
+        self.needs_done = network.use_actions
+        self.optimizer = Adam([p for p in self.network.parameters() if p.requires_grad], lr=network.learning_rate)
+        self.generator = torch.Generator()
+        self.generator.manual_seed(int(torch.randint(0, 2**31 - 1, ())))  # from the provider's seed (make_providers)
+        self.demo = None  # (obs tensors, continuous, discrete, done) of the demonstration
+
+    def set_demonstrations(self, demo) -> None:
+        """The expert's experiences (trainer.demonstrations.DemoExperiences)."""
+        self.demo = ([torch.as_tensor(o) for o in demo.obs], torch.as_tensor(demo.continuous),
+                     torch.as_tensor(demo.discrete), torch.as_tensor(demo.done, dtype=torch.float32))
+
+    def _policy_inputs(self, exp: Experience) -> tuple[list[torch.Tensor], torch.Tensor | None]:
+        actions = None
+        if self.network.use_actions:
+            done = exp.done if exp.done is not None else torch.zeros(len(exp.continuous))
+            acted = torch.clamp(exp.continuous, -CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP
+            actions = self.network.action_input(acted, exp.discrete, done)
+        return exp.obs, actions
+
+    def _expert_inputs(self, n: int) -> tuple[list[torch.Tensor], torch.Tensor | None]:
+        obs, continuous, discrete, done = self.demo
+        rows = torch.randint(0, len(done), (n,), generator=self.generator)
+        actions = (self.network.action_input(continuous[rows], discrete[rows], done[rows])
+                   if self.network.use_actions else None)
+        return [o[rows] for o in obs], actions
+
+    def _noise(self, n: int) -> torch.Tensor | None:
+        return torch.randn((n, GAIL_Z_SIZE), generator=self.generator) if self.network.use_vail else None
+
+    def evaluate(self, exp: Experience) -> np.ndarray:
+        """float32 [n], before ``strength``: -log(1 - D (1 - 1e-7))."""
+        with torch.no_grad():
+            estimate, _ = self.network.estimate(*self._policy_inputs(exp), None)
+            return (-torch.log(1.0 - estimate * (1.0 - GAIL_EPSILON))).numpy().astype(np.float32)
+
+    def update(self, exp: Experience) -> dict[str, float]:
+        net = self.network
+        n = len(exp.continuous)
+        policy_obs, policy_actions = self._policy_inputs(exp)
+        expert_obs, expert_actions = self._expert_inputs(n)
+        with torch.no_grad():
+            net.encoder.update_normalization(expert_obs)
+        policy_d, policy_mu = net.estimate(policy_obs, policy_actions, self._noise(n))
+        expert_d, expert_mu = net.estimate(expert_obs, expert_actions, self._noise(n))
+        loss = -(torch.log(expert_d + GAIL_EPSILON) + torch.log(1.0 - policy_d + GAIL_EPSILON)).mean()
+        stats = {"Policy/GAIL Policy Estimate": policy_d.mean().item(),
+                 "Policy/GAIL Expert Estimate": expert_d.mean().item(), "Losses/GAIL Loss": loss.item()}
+        total = loss
+        if net.use_vail:
+            variance = net.z_sigma ** 2
+            kl = torch.mean(-torch.sum(1 + variance.log() - 0.5 * expert_mu ** 2 - 0.5 * policy_mu ** 2 - variance,
+                                       dim=1))
+            with torch.no_grad():  # beta steps first: the reference's gradient already sees the new value
+                net.beta.copy_(torch.clamp(net.beta + GAIL_VAIL_ALPHA * (kl - GAIL_MUTUAL_INFORMATION), min=0.0))
+            total = total + net.beta.detach().clone() * (kl - GAIL_MUTUAL_INFORMATION)
+            stats.update({"Policy/GAIL Beta": net.beta.item(), "Losses/GAIL KL Loss": kl.item()})
+        penalty = GAIL_GRADIENT_PENALTY * self.gradient_penalty(policy_obs, policy_actions, expert_obs, expert_actions)
+        stats["Policy/GAIL Grad Mag Loss"] = penalty.item()
+        total = total + penalty
+        self.optimizer.zero_grad()
+        total.backward()
+        self.optimizer.step()
+        return stats
+
+    def gradient_penalty(self, policy_obs, policy_actions, expert_obs, expert_actions) -> torch.Tensor:
+        """mean((|dD/dx~| - 1)^2) at random mixes x~ of policy and expert inputs (WGAN-GP), the
+        gradient with respect to the first observation."""
+        mixed = []
+        for p, e in zip(policy_obs, expert_obs):
+            u = torch.rand(p.shape, generator=self.generator)
+            mixed.append((u * p + (1 - u) * e).requires_grad_(True))
+        actions = None
+        if policy_actions is not None:
+            u = torch.rand(policy_actions.shape, generator=self.generator)
+            actions = (u * policy_actions + (1 - u) * expert_actions).detach().requires_grad_(True)
+        estimate, _ = self.network.estimate(mixed, actions, self._noise(len(mixed[0])))
+        (gradient,) = torch.autograd.grad(estimate.sum(), mixed[0], create_graph=True)
+        norm = torch.sqrt(torch.sum(gradient.reshape(len(gradient), -1) ** 2, dim=1) + GAIL_EPSILON)
+        return torch.mean((norm - 1.0) ** 2)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"Module:GAIL": self.network.state_dict(),
+                "Optimizer:GAIL": {**self.optimizer.state_dict(), "generator": self.generator.get_state()}}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.network.load_state_dict(state["Module:GAIL"])
+        optimizer = dict(state["Optimizer:GAIL"])
+        generator = optimizer.pop("generator", None)
+        if generator is not None:
+            self.generator.set_state(generator)
+        self.optimizer.load_state_dict(optimizer)
+
+
+PROVIDERS = {"curiosity": CuriosityProvider, "rnd": RNDProvider, "gail": GAILProvider}
 
 
 def make_providers(spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int) -> dict[str, Any]:
@@ -228,3 +411,15 @@ def make_providers(spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int) -
                 providers[name] = PROVIDERS[name](spec, hyperparams, strength,
                                                   hyperparams.reward_signal_networks[name])
     return providers
+
+
+def load_providers(providers: dict[str, Any], state: dict) -> None:
+    """Restore each provider from a checkpoint (PPO, POCA and SAC alike); one the checkpoint lacks
+    (a signal added since) starts untrained, with one warning."""
+    for name, provider in providers.items():
+        keys = provider.state_dict().keys()
+        if all(key in state for key in keys):
+            provider.load_state_dict(state)
+        else:
+            logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
+                           name, ", ".join(sorted(k for k in keys if k not in state)))

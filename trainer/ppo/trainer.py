@@ -23,7 +23,7 @@ from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.losses import masked_mean, policy_loss, ppo_loss, value_loss
 from trainer.ppo.networks import Critic
 from trainer.ppo.policy import Policy
-from trainer.ppo.reward_providers import Experience, make_providers
+from trainer.ppo.reward_providers import Experience, load_providers, make_providers
 from trainer.ppo.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
 from protos.types import BehaviorSpec
 
@@ -72,6 +72,7 @@ class PPOTrainer:
         # curiosity / rnd: their own networks and optimizers (reward_providers.py)
         self.providers = make_providers(behavior_spec, hyperparams, seed + 4)
         self._needs_next_obs = any(p.needs_next_obs for p in self.providers.values())
+        self._needs_done = any(getattr(p, "needs_done", False) for p in self.providers.values())  # gail
         self._episode_intrinsic: dict[Any, dict[str, float]] = {}  # episode -> reward sums so far
         # LSTM: experiences train in sequences of this length; the critic's memory at the end of an
         # episode's last trajectory is where its next trajectory starts
@@ -90,6 +91,9 @@ class PPOTrainer:
             and self.device.type == "cpu") else None
         self._numpy_ppo: numpy_update.NumpyPPO | None = None  # built at the first numpy update
         self._rows: int | None = None  # ``update``'s rows
+        # behavioral_cloning (trainer/behavioral_cloning.py), set by behavior.make_trainer: one round
+        # of cloning after each PPO update
+        self.behavioral_cloning = None
 
     def _make_critic(self) -> torch.nn.Module:
         """PPO's critic (a POCA trainer builds its centralised one instead)."""
@@ -204,8 +208,8 @@ class PPOTrainer:
         )
 
     def _provider_experience(self, traj: Trajectory, fields: dict[str, np.ndarray]) -> Experience | None:
-        """What curiosity / rnd read of a trajectory (None without them); adds the next
-        observations to ``fields`` when one of them needs them."""
+        """What curiosity / rnd / gail read of a trajectory (None without them); adds the next
+        observations and the done flags to ``fields`` when one of them needs them."""
         if not self.providers:
             return None
         next_obs = None
@@ -213,7 +217,12 @@ class PPOTrainer:
             next_obs = [np.concatenate([o[1:], n[None]], axis=0).astype(np.float32)
                         for o, n in zip(traj.obs, traj.next_obs)]
             fields.update({_next_obs_key(i): o for i, o in enumerate(next_obs)})
-        return Experience(traj.obs, next_obs, traj.continuous_actions, traj.discrete_actions)
+        done = None
+        if self._needs_done:  # gail: 1 on the step that ended the episode
+            done = np.zeros(len(traj), np.float32)
+            done[-1] = float(traj.done)
+            fields["done"] = done
+        return Experience(traj.obs, next_obs, traj.continuous_actions, traj.discrete_actions, done=done)
 
     def _signal_rewards(self, name: str, strength: float, traj: Trajectory, experience: Experience | None,
                         terminal: bool, next_value: float, stats: dict[str, float]) -> tuple[np.ndarray, float]:
@@ -306,7 +315,10 @@ class PPOTrainer:
             self._update_numpy(learning_rate, beta, epsilon, collected)
         else:
             self._update_torch(beta, epsilon, collected)
-        return self._finish_update(collected, learning_rate, beta, epsilon)
+        result = self._finish_update(collected, learning_rate, beta, epsilon)
+        if self.behavioral_cloning is not None:
+            result.update(self.behavioral_cloning.update(self.step))
+        return result
 
     def _update_torch(self, beta: float, epsilon: float, collected: dict[str, list[float]]) -> None:
         """Autograd through the torch modules (recurrent, visual or shared-body networks, or
@@ -331,7 +343,7 @@ class PPOTrainer:
         experience = Experience(
             [batch[_obs_key(i)] for i in range(n_obs)],
             [batch[_next_obs_key(i)] for i in range(n_obs)] if self._needs_next_obs else None,
-            batch["continuous_actions"], batch["discrete_actions"], batch.get("masks"))
+            batch["continuous_actions"], batch["discrete_actions"], batch.get("masks"), batch.get("done"))
         stats: dict[str, float] = {}
         for provider in self.providers.values():
             stats.update(provider.update(experience))
@@ -366,7 +378,8 @@ class PPOTrainer:
         provider_columns = {}  # what only curiosity / rnd read: not indexed per minibatch without them
         if self.providers:
             provider_columns = {_obs_key(i): o for i, o in enumerate(obs)}
-            provider_columns.update({k: data.pop(k) for k in [_next_obs_key(i) for i in range(n_obs)] if k in data})
+            provider_columns.update({k: data.pop(k) for k in [*(_next_obs_key(i) for i in range(n_obs)), "done"]
+                                     if k in data})
         if self._numpy_ppo is None:
             self._numpy_ppo = numpy_update.NumpyPPO(self.policy.numpy_actor, self._numpy_critic, self.optimizer)
         stepper = self._numpy_ppo
@@ -391,8 +404,10 @@ class PPOTrainer:
 
     # ------------------------------------------------------------------ persistence
     def optimizers(self) -> list[Adam]:
-        """Every optimiser of this brain: PPO's, then each curiosity / rnd learner's."""
-        return [self.optimizer, *(p.optimizer for p in self.providers.values() if hasattr(p, "optimizer"))]
+        """Every optimiser of this brain: PPO's, each curiosity / rnd / gail learner's, then
+        behavioral cloning's."""
+        bc = [] if self.behavioral_cloning is None else [self.behavioral_cloning.optimizer]
+        return [self.optimizer, *(p.optimizer for p in self.providers.values() if hasattr(p, "optimizer")), *bc]
 
     def normalizers(self) -> list:
         """Every observation normaliser of the actor, the critic and the curiosity / rnd networks
@@ -427,6 +442,8 @@ class PPOTrainer:
         }
         for provider in self.providers.values():
             state.update(provider.state_dict())
+        if self.behavioral_cloning is not None:
+            state.update(self.behavioral_cloning.state_dict())
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -443,13 +460,12 @@ class PPOTrainer:
             self.critic.load_state_dict(critic_state)
             self.optimizer.load_state_dict(state["Optimizer:value_optimizer"])
         self.step = int(state["global_step"]["step"])
-        for name, provider in self.providers.items():
-            keys = provider.state_dict().keys()
-            if all(key in state for key in keys):
-                provider.load_state_dict(state)
+        load_providers(self.providers, state)
+        if self.behavioral_cloning is not None:
+            if "Optimizer:BC" in state:
+                self.behavioral_cloning.load_state_dict(state)
             else:
-                logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
-                               name, ", ".join(sorted(k for k in keys if k not in state)))
+                logger.warning("The checkpoint has no behavioral cloning state: its optimizer starts fresh.")
         rng = state.get("RNG")
         if rng is not None:
             self.policy.generator.set_state(rng["policy_sampling"])

@@ -387,6 +387,12 @@ def steps_from_agent_infos(
     return _split_steps(fields, spec)
 
 
+def agent_fields(behavior_name: str, agent_infos: Sequence, spec: BehaviorSpec) -> records.Decoded:
+    """The fields of n AgentInfoProtos in their own order (obs [n, ...] per sensor, reward, done,
+    max_step, ...), nothing dropped: a demonstration's records (trainer/demonstrations.py)."""
+    return _agent_by_agent(behavior_name, agent_infos, spec)
+
+
 def _parse(behavior_name: str, message_type, data: bytes):
     try:
         return message_type.FromString(data)

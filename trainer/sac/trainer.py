@@ -17,7 +17,6 @@ experience: after ``buffer_init_steps`` agent steps, one step per ``steps_per_up
 """
 from __future__ import annotations
 
-import logging
 from itertools import chain
 from typing import Any
 
@@ -32,15 +31,13 @@ from trainer.ppo import numpy_net
 from trainer.ppo.adam import Adam
 from trainer.ppo.buffer import Trajectory
 from trainer.ppo.networks import Critic, NetworkBody
-from trainer.ppo.reward_providers import Experience, make_providers
+from trainer.ppo.reward_providers import Experience, load_providers, make_providers
 from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
 from trainer.ppo.trainer import PPOTrainer
 from trainer.sac import losses
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.policy import SACPolicy
 from trainer.sac.replay_buffer import ReplayBuffer
-
-logger = logging.getLogger("mlagents_like")
 
 
 class TwinQ(nn.Module):
@@ -134,6 +131,7 @@ class SACTrainer:
         self.reward_signal_update_steps = 1  # reward-signal learner steps + 1 (likewise)
         self._numpy_critic = numpy_net.NumpyCritic(self.critic) if (
             numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
+        self.behavioral_cloning = None  # trainer/behavioral_cloning.py, set by behavior.make_trainer
 
     # the recurrent critic's value estimates run sequence by sequence as PPO's (one implementation)
     _value_estimates_by_sequence = PPOTrainer._value_estimates_by_sequence
@@ -249,7 +247,10 @@ class SACTrainer:
             copy_normalization(actor_body, network.network_body)
         collected: dict[str, list[float]] = {}
         while self._updates_due():
-            for key, value in self.gradient_step(self._sample()).items():
+            stats = self.gradient_step(self._sample())
+            if self.behavioral_cloning is not None:  # after every gradient step, as the reference does
+                stats.update(self.behavioral_cloning.update(self.step))
+            for key, value in stats.items():
                 collected.setdefault(key, []).append(value)
             self.update_steps += 1
         # then the reward-signal learners catch up, on minibatches of their own (the reference
@@ -392,7 +393,9 @@ class SACTrainer:
     def state_dict(self) -> dict[str, Any]:
         """checkpoint.pt content: the reference's keys, plus the entropy coefficients (which the
         reference does not save), the update counter and the generators (``RNG``)."""
+        bc = {} if self.behavioral_cloning is None else self.behavioral_cloning.state_dict()
         return {
+            **bc,
             "Policy": self.policy.actor.state_dict(),
             "global_step": {"step": torch.tensor(self.step, dtype=torch.int64)},
             "Optimizer:q_network": self.q_network.state_dict(),
@@ -431,13 +434,9 @@ class SACTrainer:
         self.reward_signal_update_steps = (
             int(sac["reward_signal_update_steps"]) if sac is not None and "reward_signal_update_steps" in sac
             else int(max(1, self.step / self.hyperparams.reward_signal_steps_per_update)))
-        for name, provider in self.providers.items():
-            keys = provider.state_dict().keys()
-            if all(key in state for key in keys):
-                provider.load_state_dict(state)
-            else:
-                logger.warning("The checkpoint has no %s reward signal (%s): it starts untrained.",
-                               name, ", ".join(sorted(k for k in keys if k not in state)))
+        load_providers(self.providers, state)
+        if self.behavioral_cloning is not None and "Optimizer:BC" in state:
+            self.behavioral_cloning.load_state_dict(state)
         rng = state.get("RNG")
         if rng is not None:
             self.policy.generator.set_state(rng["policy_sampling"])

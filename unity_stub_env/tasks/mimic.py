@@ -29,8 +29,18 @@ steps a bench run affords on this machine would be ~100 episodes; DeepMimic itse
 
 Actions, 26 continuous in [-1, 1], one per axis in mimic.xml's actuator order (``JOINTS`` of
 ``mimic_motions``). Environment parameter ``residual`` (read at episode start):
-  0 (default, the thesis): target = low + (a + 1) / 2 (high - low), the action mapped linearly
-    onto the axis' limits (a = 0 is the middle of the range, not the standing pose);
+  0 (default, the thesis' absolute targets): target = a high for a >= 0, -a low for a < 0: the
+    action mapped piecewise linearly onto the axis' limits with a = 0 at the anatomical neutral
+    (0 rad, mimic.xml's standing pose; every range contains it). Why not the linear map
+    low + (a + 1) / 2 (high - low): its a = 0 is the middle of each range (hips 45 deg, knees 75
+    deg flexed: a deep crouch), so an untrained policy folded and fell within 0.8 s and PPO learned
+    nothing in 80k steps (bench/RESULTS.md, 2026-11-25 evening); with the neutral at a = 0 the
+    untrained policy stands in the PD's rest pose and the whole range stays reachable (zero
+    actions: stand, arms and squat kept 10 s, r_r 1.00 / 0.05 / 0.29; a push of 10 N s every 2 s
+    withstood in 100 % of trials, 15 N s in 62 %). Exploration is the hard part of this mode: PPO's
+    Gaussian starts at std 1/3 in action units (std 1, sent as clamp(a, -3, 3) / 3), and white
+    noise of std 0.1 (0.05) around the standing pose already topples the ragdoll in ~1.3 s (~3 s);
+    bench runs start from a checkpoint with a smaller std (``bench/mimic/warm_start.py``);
   r > 0 (DeepMimic-like, our option): target = reference angle + a r (high - low) / 2, clipped to
     the limits: zero actions track the reference and the policy learns corrections.
 
@@ -338,7 +348,7 @@ class MimicTask(Task):
         """[n, 26] PD targets (rad) from actions [n, 26] in [-1, 1] (see ``residual``), aimed at the
         reference frame the decision leads to."""
         span = self.high - self.low
-        absolute = self.low + (action + 1.0) * 0.5 * span
+        absolute = np.where(action >= 0.0, action * self.high, -action * self.low)
         following = self.ref.joints[self.ref_rows((self.frame + 1) % self.ref.frames[self.motion])]
         residual = np.clip(following + action * self.residual[:, None] * 0.5 * span, self.low, self.high)
         return np.where(self.residual[:, None] > 0, residual, absolute)
