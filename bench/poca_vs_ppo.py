@@ -1,6 +1,7 @@
 """MA-POCA vs independent PPO on the cooperative stub task ``pushblock`` at equal steps (run by hand).
 
     nice -n 10 .venv/bin/python bench/poca_vs_ppo.py [--max-steps 60000] [--seeds 1 2 3] [--num-areas 8]
+        [--env-param block_friction=12 ...]
 
 configs/pushblock_poca.yaml is run as shipped (``trainer_type: poca``) and with ``trainer_type: ppo``
 and nothing else changed (the same hyperparameters, network, seeds, areas and steps). Independent
@@ -9,7 +10,8 @@ one agent only and its advantages carry no counterfactual baseline. Reported per
 read back from TensorBoard: ``PushBlock/Success`` (the fraction of group episodes that brought the
 block home) and ``Policy/Extrinsic Reward`` (each agent's episode return, group rewards included) at
 every summary; the table gives the first summary step with a success rate >= 0.9 and the mean of
-the last 3 summaries. JSON to ``<out>/poca_vs_ppo.json``.
+the last 3 summaries. ``--env-param KEY=VALUE`` adds a constant environment parameter of the task
+(``block_friction``, ``progress_reward``: unity_stub_env/tasks/pushblock.py) to both configs. JSON to ``<out>/poca_vs_ppo.json``.
 """
 from __future__ import annotations
 
@@ -35,10 +37,13 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
-def run(trainer_type: str, seed: int, max_steps: int, areas: int, work: Path) -> dict[str, list[tuple[int, float]]]:
+def run(trainer_type: str, seed: int, max_steps: int, areas: int, work: Path,
+        env_params: dict[str, float]) -> dict[str, list[tuple[int, float]]]:
     text = (ROOT / "configs" / "pushblock_poca.yaml").read_text()
     text = text.replace("trainer_type: poca", f"trainer_type: {trainer_type}").replace(
         "max_steps: 60000", f"max_steps: {max_steps}")
+    if env_params:
+        text += "environment_parameters:\n" + "".join(f"  {k}: {v}\n" for k, v in env_params.items())
     config = work / f"{trainer_type}.yaml"
     config.write_text(text)
     run_id = f"{trainer_type}-{seed}"
@@ -59,20 +64,27 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--num-areas", type=int, default=8)
     parser.add_argument("--out", default=str(ROOT / "bench" / "out"))
+    parser.add_argument("--env-param", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
+    try:
+        env_params = {k: float(v) for k, v in (item.split("=", 1) for item in args.env_param)}
+    except ValueError:
+        sys.exit(f"--env-param takes KEY=NUMBER, got {args.env_param}")
     results: dict[str, dict[int, dict]] = {"poca": {}, "ppo": {}}
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
             for trainer_type in results:
-                results[trainer_type][seed] = run(trainer_type, seed, args.max_steps, args.num_areas, Path(tmp))
-    print(f"pushblock, {args.max_steps} steps, {args.num_areas} areas; mean of the last 3 summaries")
+                results[trainer_type][seed] = run(trainer_type, seed, args.max_steps, args.num_areas, Path(tmp),
+                                                     env_params)
+                print(trainer_type, seed, results[trainer_type][seed], flush=True)
+    print(f"pushblock {env_params}, {args.max_steps} steps, {args.num_areas} areas; mean of the last 3 summaries")
     print("| trainer | seed | first step with success >= 0.9 | PushBlock/Success | Policy/Extrinsic Reward |")
     print("|---|---|---|---|---|")
     for trainer_type, by_seed in results.items():
         for seed, curves in by_seed.items():
             last = [statistics.mean(v for _, v in curves[tag][-3:]) for tag in TAGS]
             first = next((step for step, v in curves[TAGS[0]] if v >= 0.9), None)
-            print(f"| {trainer_type} | {seed} | {first or 'never'} | {last[0]:.3f} | {last[1]:.3f} |")
+            print(f"| {trainer_type} | {seed} | {first or 'never'} | {last[0]:.3f} | {last[1]:.3f} |", flush=True)
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "poca_vs_ppo.json"), "w") as stream:
         json.dump({"args": vars(args), "results": results}, stream, indent=1)

@@ -373,7 +373,8 @@ class BehaviorRunner:
             return {}
         elo = None
         if self.self_play is not None and len(traj):
-            elo = self.self_play.rate_trajectory(float(traj.rewards[-1]), traj.done, traj.interrupted)
+            group_done = traj.group is None or traj.group.all_done  # GroupTracker's columns (POCA)
+            elo = self.self_play.rate_trajectory(float(traj.rewards[-1]), traj.done, traj.interrupted, group_done)
         if self.trainer.step + len(traj) >= self.next_checkpoint:
             if self.writes_files:
                 self.save_checkpoint(status, summary_follows=self.trainer.step + len(traj) >= self.next_summary)

@@ -11,7 +11,8 @@ The contract, as ML-Agents' ghost trainer has it (docs/selfplay.md):
   ``window`` of them in a ring. Every ``swap_steps`` ghost steps (and at a team change) each other
   team draws its opponent again: the latest policy with probability
   ``play_against_latest_model_ratio``, otherwise a snapshot from the window, uniformly.
-* ELO: a learning-team trajectory that ends its episode (not interrupted by max_step) is one game;
+* ELO: a learning-team trajectory that ends its episode (not interrupted by max_step; in an agent
+  group, with every teammate's episode over too) is one game;
   the sign of its last reward says win (1), draw (0.5) or loss (0). The learning policy's rating
   moves by ``result - expected`` (expected = 1 / (1 + 10^((opponent - own) / 400)), no K factor, as
   the reference) and the opponent snapshot's rating by the opposite amount. Against the latest
@@ -154,10 +155,12 @@ class SelfPlay:
         """Experiences of a team that does not learn: not trained on, counted towards swap_steps."""
         self.ghost_step += int(steps)
 
-    def rate_trajectory(self, final_reward: float, done: bool, interrupted: bool) -> float | None:
+    def rate_trajectory(self, final_reward: float, done: bool, interrupted: bool,
+                        group_done: bool = True) -> float | None:
         """One game for an episode-ending learning-team trajectory; returns the new ELO, or None
-        when the trajectory does not end a game (cut at time_horizon, or interrupted)."""
-        if not done or interrupted:
+        when the trajectory does not end a game (cut at time_horizon, or interrupted, or, in an agent
+        group (POCA), some teammate's episode is still going: ``group_done`` False)."""
+        if not done or interrupted or not group_done:
             return None
         change = self.controller.rate_game(self.current_elo, game_result(final_reward))
         self.elos[-1] += change

@@ -1,6 +1,6 @@
 """Self-play end to end on the soccer stub (two behaviors Soccer?team=0/1 over real gRPC):
 only the learning team trains, Self-play/ELO in TensorBoard, --resume keeps the ELO and the
-snapshot window, and the same layer works with SAC."""
+snapshot window, and the same layer works with SAC and POCA."""
 from __future__ import annotations
 
 import json
@@ -100,3 +100,40 @@ def test_selfplay_with_sac(tmp_path, env_no_proxy):
     assert len(state["SelfPlay"]["snapshots"]) >= 5  # the window of 5 filled (one per > 500 steps)
     assert 0.8 * step <= int(state["SelfPlay"]["counters"][2]) <= 1.2 * step
     assert (res / "sac/Soccer.onnx").is_file()
+
+
+POCA_SELFPLAY = PPO_SELFPLAY.replace("trainer_type: ppo", "trainer_type: poca")
+
+
+def test_selfplay_with_poca_swaps_writes_elo_and_resume_keeps_the_window(tmp_path, env_no_proxy):
+    """trainer_type poca under self_play on soccer (each player is a group of one, as an agent without
+    a group is in the reference): the other team plays snapshots, Self-play/ELO is written, the
+    team changes, --resume continues the window and the rating."""
+    assert "trainer_type: poca" in POCA_SELFPLAY
+    res = tmp_path / "results"
+    common = ["--env", "stub:soccer", "--num-areas", "8", "--seed", "5", "--results-dir", str(res),
+              "--run-id", "poca", "--base-port", str(free_port_block())]
+    r = learn([config(tmp_path, "p.yaml", 3000, text=POCA_SELFPLAY), *common], cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "team 1 learns now" in r.stdout + r.stderr  # team_change 2000 < 3000 steps
+    first = load_checkpoint(res / "poca/Soccer/checkpoint.pt")
+    assert any(key.startswith("attention.") for key in first["Optimizer:critic"])  # POCA's critic trained
+    sp1 = first["SelfPlay"]
+    step1 = int(first["global_step"]["step"])
+    assert 0.8 * step1 <= int(sp1["counters"][2]) <= 1.2 * step1  # the ghost team's steps, counted only
+    n1 = len(sp1["snapshots"])
+    assert n1 >= step1 // 500 >= 5, (n1, step1)
+    elo1 = elo_scalars(res / "poca/Soccer")
+    assert elo1 and all(1100 < v < 1300 for _, v in elo1), elo1
+    assert len({round(v, 3) for _, v in elo1}) > 1, elo1  # games were rated: the rating moved
+
+    r = learn([config(tmp_path, "q.yaml", 5000, initial_elo=1500.0, text=POCA_SELFPLAY), *common, "--resume"],
+              cwd=tmp_path, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    sp2 = load_checkpoint(res / "poca/Soccer/checkpoint.pt")["SelfPlay"]
+    assert len(sp2["snapshots"]) > n1
+    for old, new in zip(sp1["snapshots"], sp2["snapshots"][:n1]):
+        assert old.keys() == new.keys() and all(torch.equal(old[k], new[k]) for k in old)
+    after = [v for s, v in elo_scalars(res / "poca/Soccer") if s > step1]
+    assert after and all(abs(v - float(sp1["elos"][-1])) < 100 for v in after), (sp1["elos"][-1], after)
+    assert (res / "poca/Soccer.onnx").is_file()

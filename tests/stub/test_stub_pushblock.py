@@ -13,14 +13,19 @@ import pytest
 
 from tests.stub.conftest import REPO
 from unity_stub_env.tasks import make_task
+from unity_stub_env.tasks.base import EnvironmentParameters
 from unity_stub_env.tasks.pushblock import GOAL_Y, LEAVE_REWARD, MAX_STEP, TIME_PENALTY
 
 INTEROP_PYTHON = os.path.join(REPO, ".venv-interop", "bin", "python")
 
 
-def play(actions: list[int], steps: int = 200, seed: int = 1):
-    """Both agents of one area repeat ``actions``: (steps to the end, group return, result, block y)."""
-    task = make_task("pushblock", num_areas=1, seed=seed)
+def play(actions: list[int], steps: int = 200, seed: int = 1, **params: float):
+    """Both agents of one area repeat ``actions``: (steps to the end, group return, result, block y).
+    ``params``: environment parameters, set before the first episode starts."""
+    env_params = EnvironmentParameters()
+    for key, value in params.items():
+        env_params.set(key, lambda value=value: value)
+    task = make_task("pushblock", num_areas=1, seed=seed, env_params=env_params)
     total = 0.0
     for step in range(1, steps + 1):
         result = task.step(None, np.array(actions, np.int32).reshape(2, 1))
@@ -40,6 +45,21 @@ def test_two_agents_push_the_block_home_one_alone_cannot_in_time():
     assert steps == MAX_STEP and result.interrupted.all() and 0.5 < block_y < GOAL_Y
     steps, total, result, block_y = play([0, 0])
     assert steps == MAX_STEP and total == pytest.approx(-0.5, abs=1e-5) and block_y == 0.0
+
+
+def test_block_friction_12_only_both_move_the_block_and_progress_reward_0_is_sparse():
+    """block_friction 12 N, above one agent's 10 N: pushing alone for the whole timeout moves the
+    block 0.08 m (MuJoCo's friction is soft: the impact and a slow creep; 0.79 m at the default
+    9 N), return -0.43; both together arrive in 28 steps instead of 22 (measured).
+    progress_reward 0: only the success reward and the time penalty remain."""
+    steps, total, result, block_y = play([1, 0], block_friction=12.0)
+    assert steps == MAX_STEP and result.interrupted.all() and 0.0 < block_y < 0.1
+    assert total == pytest.approx(-0.5 + block_y / GOAL_Y, abs=1e-5)
+    steps, total, result, block_y = play([1, 1], block_friction=12.0)
+    assert steps == 28 and block_y >= GOAL_Y and not result.interrupted.any()
+    assert total == pytest.approx(block_y / GOAL_Y + 1.0 + steps * TIME_PENALTY, abs=1e-5)
+    steps, total, result, block_y = play([1, 1], progress_reward=0.0)
+    assert steps == 22 and total == pytest.approx(1.0 + 22 * TIME_PENALTY, abs=1e-5)
 
 
 def test_an_agent_that_leaves_the_floor_ends_alone_and_comes_back_to_its_group():

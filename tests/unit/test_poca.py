@@ -197,6 +197,30 @@ def test_poca_updates_and_its_checkpoint_round_trips():
         assert torch.equal(a, b)
 
 
+def test_agents_without_a_group_train_with_a_critic_of_one():
+    """group id 0 (soccer's players; no GroupColumns): the value and the baseline see the agent
+    alone, both the same function of its observations, so the advantage is PPO's (return - V)."""
+    trainer = POCATrainer("B", SPEC, PPOHyperparams(hidden_units=8, num_layers=1, batch_size=3, buffer_size=3,
+                                                    num_epoch=1), seed=0)
+    traj = trajectory(True, False, True)
+    traj.group = None
+    traj.obs = [np.random.default_rng(0).normal(size=(3, 2)).astype(np.float32)]
+    trainer.process_trajectory(traj)
+    fields = trainer.buffer.concatenated()
+    assert trainer.group_width == 0 and fields["mates_present"].shape == (3, 0)
+    assert np.all(np.isfinite(fields["advantages"])) and np.all(np.isfinite(fields["returns:extrinsic"]))
+    with torch.inference_mode():
+        obs = [torch.as_tensor(traj.obs[0])]
+        value = trainer.critic.value([obs[0].unsqueeze(1)], torch.ones((3, 1), dtype=torch.bool))["extrinsic"]
+        baseline = trainer.critic.baseline(obs, [torch.zeros(3, 0, 2)], torch.zeros(3, 0, 1),
+                                           torch.zeros(3, 0, 1, dtype=torch.int64),
+                                           torch.zeros(3, 0, dtype=torch.bool))["extrinsic"]
+    torch.testing.assert_close(value, baseline)
+    np.testing.assert_allclose(fields["baselines:extrinsic"], value.numpy(), rtol=1e-6)
+    stats = trainer.update()
+    assert np.isfinite(stats["Losses/Value Loss"]) and np.isfinite(stats["Losses/Baseline Loss"])
+
+
 def test_poca_with_memory_is_refused_before_the_run():
     from trainer.config.settings import MemorySettings, NetworkSettings, POCASettings, TrainerSettings
     from trainer.config.support import unsupported

@@ -77,6 +77,7 @@ def test_games_that_do_not_end_or_are_interrupted_are_not_rated_and_self_games_c
     sp.add_team(1)
     assert sp.rate_trajectory(1.0, done=False, interrupted=False) is None
     assert sp.rate_trajectory(1.0, done=True, interrupted=True) is None
+    assert sp.rate_trajectory(1.0, done=True, interrupted=False, group_done=False) is None  # a teammate plays on
     sp.current_opponent = -1  # playing the latest policy: one rating on both sides
     assert sp.rate_trajectory(1.0, done=True, interrupted=False) == pytest.approx(1000.0)
     assert sp.elos == [1000.0, 1000.0, 1000.0]

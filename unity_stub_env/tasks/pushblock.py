@@ -26,6 +26,12 @@ group and does not see the group's later rewards in the episode that ended (the 
 critic credits them, docs/poca.md). When both agents of an area have left in the same step, the
 area starts over (block included).
 
+Environment parameters (read at each area's group episode start, Unity's EnvironmentParameters):
+  block_friction   (default 9) the block joints' dry friction in N. At >= 10 one agent's 10 N cannot
+                   move the block at all and only both pushing together earn progress (at 10: 0.625 m/s).
+  progress_reward  (default 1) the scale of the progress term; 0 leaves only the sparse success
+                   reward and the time penalty.
+
 Measured (tests/stub/test_stub_pushblock.py): both pushing +y all the way reach the goal in 22
 steps, group return ~1.2 / 1.2 + 1 - 22 * 0.5 / 80 = 1.86 (1.875 with the last step's overshoot);
 a still policy returns -0.5 (the whole timeout); one agent pushing alone for the whole timeout
@@ -51,6 +57,8 @@ START_Y = -0.6
 MAX_STEP = 80
 TIME_PENALTY = -0.5 / MAX_STEP
 SUCCESS_REWARD = 1.0
+BLOCK_FRICTION = 9.0  # N, the block joints' dry friction (pushblock.xml); environment parameter block_friction
+PROGRESS_REWARD = 1.0  # scale of the progress term; environment parameter progress_reward
 LEAVE_REWARD = -1.0  # individual: without it, leaving early dodged the time penalty (measured: episodes
 # shrank to 12 steps within 40k steps of POCA training and no block reached the goal)
 _FORCE_OF_ACTION = np.array([[0, 0], [0, 1], [0, -1], [1, 0], [-1, 0]], dtype=np.float64)
@@ -88,6 +96,8 @@ class PushBlockTask(Task):
         self.data = mujoco.MjData(self.model)
         # per area, qpos/qvel columns: block x, y, agent0 x, y, agent1 x, y (the XML's joint order)
         self.qpos = self.data.qpos.reshape(self.num_areas, 6)
+        self.friction = self.model.dof_frictionloss.reshape(self.num_areas, 6)  # a view: writes reach MuJoCo
+        self.progress_scale = np.full(self.num_areas, PROGRESS_REWARD)
         self.qvel = self.data.qvel.reshape(self.num_areas, 6)
         self.ctrl = self.data.ctrl.reshape(self.num_areas, 4)
         self.episode_step = np.zeros(self.num_areas, dtype=np.int64)
@@ -107,6 +117,8 @@ class PushBlockTask(Task):
             offset = self.rng.uniform(0.15, 0.45, size=2)
             self.start[area] = [[block_x - offset[0], START_Y], [block_x + offset[1], START_Y]]
             self.qpos[area, 0:2] = (block_x, 0.0)
+            self.friction[area, 0:2] = max(0.0, self.env_params.get("block_friction", BLOCK_FRICTION))
+            self.progress_scale[area] = self.env_params.get("progress_reward", PROGRESS_REWARD)
             self.qvel[area, 0:2] = 0.0
             self.episode_step[area] = 0
         for area, agent in zip(*np.nonzero(agents)):
@@ -138,7 +150,7 @@ class PushBlockTask(Task):
         block_y = self.qpos[:, 1]
         success = block_y >= GOAL_Y
         timeout = ~success & (self.episode_step >= self.max_step)
-        area_reward = TIME_PENALTY + (block_y - before) / GOAL_Y + np.where(success, SUCCESS_REWARD, 0.0)
+        area_reward = TIME_PENALTY + self.progress_scale * (block_y - before) / GOAL_Y + np.where(success, SUCCESS_REWARD, 0.0)
         pos = self.qpos[:, 2:6].reshape(self.num_agents, 2)
         off_floor = (np.abs(pos) > FLOOR_HALF).any(axis=1)
         group_end = np.repeat(success | timeout, AGENTS)
