@@ -98,7 +98,12 @@ def test_stub_exited_cleanly(trained_run):
     assert _stub_processes_on_port(port) == []
     player_log = (run_dir / "run_logs" / "Player-0.log").read_text()
     assert "Task basic: behavior Basic?team=0, 1 agents (1 areas), seed 3" in player_log
-    assert "The trainer closed the session (status 400)." in player_log
+    # mlagents-learn's close answers the last call with status 400, then stops its grpcio server:
+    # the answer or the server's end may reach the stub first; either way it quits cleanly
+    assert ("The trainer closed the session (status 400)." in player_log
+            or f"The trainer at localhost:{port} went away (INTERNAL); quitting like a Unity player does." in player_log
+            or f"The trainer at localhost:{port} went away (UNAVAILABLE); quitting like a Unity player does."
+            in player_log), player_log
 
 
 def test_configuration_and_timers(trained_run):
