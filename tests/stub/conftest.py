@@ -1,8 +1,10 @@
 """A raw scripted trainer (gRPC server) and a launcher for the stub as a separate process."""
 from __future__ import annotations
 
+import json
 import os
 import queue
+import socket
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -18,6 +20,7 @@ from protos.communicator_objects import (
 )
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+INTEROP_PYTHON = os.path.join(REPO, ".venv-interop", "bin", "python")  # the real ML-Agents 1.1.0
 STEP, RESET, QUIT = 0, 1, 2
 Message = unity_message_pb2.UnityMessageProto
 
@@ -122,3 +125,16 @@ def handshake(trainer: ScriptedTrainer, seed: int = 0, num_areas: int = 1, side_
     second = trainer.exchange(init_answer(seed, num_areas))
     third = trainer.exchange(command_answer(RESET, side_channel))
     return first, second, third
+
+
+def run_interop_script(script: str, timeout: float = 120) -> dict:
+    """Run ``script`` in the interop venv with argv (free port, this Python, the repo) and return
+    the JSON of its last ``RESULT {...}`` line (ML-Agents and our protos never share a process)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    done = subprocess.run([INTEROP_PYTHON, "-c", script, str(port), sys.executable, REPO],
+                          cwd="/tmp", capture_output=True, text=True, timeout=timeout)
+    lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
+    assert lines, done.stdout + done.stderr
+    return json.loads(lines[-1][len("RESULT "):])

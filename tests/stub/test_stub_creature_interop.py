@@ -1,16 +1,11 @@
 """The real mlagents_envs 1.1.0 (its own venv and process) drives the stub's ``creature`` task."""
 from __future__ import annotations
 
-import json
 import os
-import socket
-import subprocess
-import sys
 
 import pytest
 
-from tests.stub.conftest import REPO
-from tests.stub.test_stub_interop import INTEROP_PYTHON
+from tests.stub.conftest import INTEROP_PYTHON, run_interop_script
 from unity_stub_env.creatures import generate
 
 # Runs inside .venv-interop: mlagents_envs listens (Editor mode), our stub connects.
@@ -55,14 +50,7 @@ print("RESULT " + json.dumps(out))
 @pytest.mark.interop
 @pytest.mark.skipif(not os.path.exists(INTEROP_PYTHON), reason="needs .venv-interop with mlagents 1.1.0")
 def test_real_mlagents_envs_drives_the_creature_task():
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    done = subprocess.run([INTEROP_PYTHON, "-c", _SCRIPT, str(port), sys.executable, REPO],
-                          cwd="/tmp", capture_output=True, text=True, timeout=180)
-    lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
-    assert lines, done.stdout + done.stderr
-    out = json.loads(lines[-1][len("RESULT "):])
+    out = run_interop_script(_SCRIPT, timeout=180)
     biped = generate("biped", 3)
     assert out["behaviors"] == ["Creature?team=0"]
     assert out["continuous"] == biped.num_hinges()

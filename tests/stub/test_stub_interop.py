@@ -1,17 +1,12 @@
 """The stub driven by the REAL mlagents_envs 1.1.0 (its own venv and process) in Editor mode."""
 from __future__ import annotations
 
-import json
 import os
-import socket
-import subprocess
-import sys
 
 import pytest
 
-from tests.stub.conftest import REPO
+from tests.stub.conftest import INTEROP_PYTHON, run_interop_script
 
-INTEROP_PYTHON = os.path.join(REPO, ".venv-interop", "bin", "python")
 
 # Runs inside .venv-interop: mlagents_envs listens (Editor mode, base_port = port), our stub connects.
 _SCRIPT = r"""
@@ -75,14 +70,7 @@ print("RESULT " + json.dumps(out))
 @pytest.mark.interop
 @pytest.mark.skipif(not os.path.exists(INTEROP_PYTHON), reason="needs .venv-interop with mlagents 1.1.0")
 def test_real_mlagents_envs_drives_the_stub():
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    done = subprocess.run([INTEROP_PYTHON, "-c", _SCRIPT, str(port), sys.executable, REPO],
-                          cwd="/tmp", capture_output=True, text=True, timeout=120)
-    lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
-    assert lines, done.stdout + done.stderr
-    out = json.loads(lines[-1][len("RESULT "):])
+    out = run_interop_script(_SCRIPT)
     assert out["behaviors"] == ["Basic?team=0"]
     assert out["branches"] == [3] and out["obs_shapes"] == [[20]]
     assert out["start"] == [10, 10] and out["mask"] == [[[False, False, False]] * 2]

@@ -2,21 +2,15 @@
 group rewards as the REAL mlagents_envs 1.1.0 (its own venv and process) receives them."""
 from __future__ import annotations
 
-import json
 import os
-import socket
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from tests.stub.conftest import REPO
+from tests.stub.conftest import INTEROP_PYTHON, run_interop_script
 from unity_stub_env.tasks import make_task
 from unity_stub_env.tasks.base import EnvironmentParameters
 from unity_stub_env.tasks.pushblock import GOAL_Y, LEAVE_REWARD, MAX_STEP, TIME_PENALTY
-
-INTEROP_PYTHON = os.path.join(REPO, ".venv-interop", "bin", "python")
 
 
 def play(actions: list[int], steps: int = 200, seed: int = 1, **params: float):
@@ -116,14 +110,7 @@ print("RESULT " + json.dumps(out))
 @pytest.mark.interop
 @pytest.mark.skipif(not os.path.exists(INTEROP_PYTHON), reason="needs .venv-interop with mlagents 1.1.0")
 def test_real_mlagents_envs_sees_the_groups_and_their_rewards():
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    done = subprocess.run([INTEROP_PYTHON, "-c", _SCRIPT, str(port), sys.executable, REPO],
-                          cwd="/tmp", capture_output=True, text=True, timeout=120)
-    lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
-    assert lines, done.stdout + done.stderr
-    out = json.loads(lines[-1][len("RESULT "):])
+    out = run_interop_script(_SCRIPT)
     assert out["behaviors"] == ["PushBlock?team=0"] and out["branches"] == [5]
     assert out["group_ids"] == [1, 1, 2, 2]
     # every step's group reward: the hurry penalty plus the block's progress / GOAL_Y (the same for

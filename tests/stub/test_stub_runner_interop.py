@@ -3,16 +3,11 @@ with its track set through ML-Agents' own EnvironmentParametersChannel: the plai
 ``track.count``, ``track.length``, ``track.i`` that the ``hmm`` sampler sends (docs/protocol.md §4.4)."""
 from __future__ import annotations
 
-import json
 import os
-import socket
-import subprocess
-import sys
 
 import pytest
 
-from tests.stub.conftest import REPO
-from tests.stub.test_stub_interop import INTEROP_PYTHON
+from tests.stub.conftest import INTEROP_PYTHON, run_interop_script
 
 _SCRIPT = r"""
 import json, subprocess, sys
@@ -54,14 +49,7 @@ print("RESULT " + json.dumps(out))
 @pytest.mark.interop
 @pytest.mark.skipif(not os.path.exists(INTEROP_PYTHON), reason="needs .venv-interop with mlagents 1.1.0")
 def test_real_mlagents_envs_drives_the_runner_on_a_track_it_sent():
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    done = subprocess.run([INTEROP_PYTHON, "-c", _SCRIPT, str(port), sys.executable, REPO],
-                          cwd="/tmp", capture_output=True, text=True, timeout=120)
-    lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
-    assert lines, done.stdout + done.stderr
-    out = json.loads(lines[-1][len("RESULT "):])
+    out = run_interop_script(_SCRIPT)
     assert out["behaviors"] == ["Runner?team=0"]
     assert out["continuous"] == 1 and out["obs_shapes"] == [[29]]
     # every agent sees: the start platform (straight), three Left platforms, then the end

@@ -3,23 +3,18 @@ team frames, goals and timeouts by hand, the academy's per-behavior infos and ac
 real mlagents_envs 1.1.0 driving it."""
 from __future__ import annotations
 
-import json
 import os
-import socket
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 from protos.communicator_objects import agent_action_pb2
-from tests.stub.conftest import REPO
+from tests.stub.conftest import INTEROP_PYTHON, run_interop_script
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter
 from unity_stub_env.tasks import make_task
 from unity_stub_env.tasks.soccer import BALL_RADIUS, PITCH_HALF_LENGTH, TIME_PENALTY, SoccerTask
 
-INTEROP_PYTHON = os.path.join(REPO, ".venv-interop", "bin", "python")
 NO_CONT = np.zeros((4, 0), np.float32)
 
 
@@ -169,14 +164,7 @@ print("RESULT " + json.dumps(out))
 def test_real_mlagents_envs_drives_both_teams():
     """A scripted team 0 (runs at the ball) against a team 1 standing still, through the real
     UnityEnvironment: two behaviors with team ids, identical specs, +1 / -1 at the first goal."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    done = subprocess.run([INTEROP_PYTHON, "-c", _SCRIPT, str(port), sys.executable, REPO],
-                          cwd="/tmp", capture_output=True, text=True, timeout=180)
-    lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
-    assert lines, done.stdout + done.stderr
-    out = json.loads(lines[-1][len("RESULT "):])
+    out = run_interop_script(_SCRIPT, timeout=180)
     assert out["behaviors"] == ["Soccer?team=0", "Soccer?team=1"]
     assert out["same_specs"] and out["obs"] == [[12]] and out["branches"] == [3, 3]
     assert len(out["ids"][0]) == 2 and len(out["ids"][1]) == 2 and not set(out["ids"][0]) & set(out["ids"][1])
