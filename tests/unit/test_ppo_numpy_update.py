@@ -119,10 +119,16 @@ def test_numpy_steps_match_autograd_and_adam(action_spec, masked):
             np.testing.assert_allclose(x.numpy(), y.numpy(), rtol=1e-4, atol=2e-5, err_msg=f"{module}.{key}")
     np.testing.assert_allclose(fast.optimizer.exp_avg_sq, slow.optimizer.exp_avg_sq, rtol=1e-3, atol=1e-9)
     # the weights moved, and the numpy actor used for deciding sees the new ones
+    assert_numpy_actor_sees(fast.policy.actor, fast.policy._numpy_actor)
+
+
+def assert_numpy_actor_sees(actor: torch.nn.Module, numpy_actor) -> None:
+    """The numpy actor that decides gives the torch actor's heads (obs 5 + 3 wide, 4 rows): it reads
+    the weights an update changed in place (PPO's and SAC's numpy steps)."""
     obs = [np.ones((4, 5), np.float32), np.zeros((4, 3), np.float32)]
     with torch.no_grad():
-        mu, logits = fast.policy.actor.heads([torch.from_numpy(o) for o in obs], None)
-    fast_mu, fast_logits, _ = fast.policy._numpy_actor.heads(obs, None)
+        mu, logits = actor.heads([torch.from_numpy(o) for o in obs], None)
+    fast_mu, fast_logits, _ = numpy_actor.heads(obs, None)
     if mu is not None:
         np.testing.assert_allclose(fast_mu, mu.numpy(), rtol=1e-5, atol=1e-6)
     for x, y in zip(fast_logits, logits):

@@ -12,8 +12,10 @@ One trainer per brain, with the PPOTrainer's interface for the run loop (``proce
   ``reward_signal_steps_per_update`` agent steps (as the reference does).
 
 Each gradient step samples ``batch_size`` experiences and steps three Adams (adam.py): the policy
-on its loss, V + Q1 + Q2 on theirs, the log alphas on theirs. Gradient steps keep pace with
-experience: after ``buffer_init_steps`` agent steps, one step per ``steps_per_update`` agent steps.
+on its loss, V + Q1 + Q2 on theirs, the log alphas on theirs; for vector observations without
+memory on the CPU in numpy with hand-written gradients (numpy_step.py says why), otherwise in
+autograd. Gradient steps keep pace with experience: after ``buffer_init_steps`` agent steps, one
+step per ``steps_per_update`` agent steps.
 """
 from __future__ import annotations
 
@@ -34,7 +36,7 @@ from trainer.ppo.networks import Critic, NetworkBody
 from trainer.ppo.reward_providers import Experience, load_providers, make_providers
 from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
 from trainer.ppo.trainer import PPOTrainer
-from trainer.sac import losses
+from trainer.sac import losses, numpy_step
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.policy import SACPolicy
 from trainer.sac.replay_buffer import ReplayBuffer
@@ -132,6 +134,8 @@ class SACTrainer:
         self._numpy_critic = numpy_net.NumpyCritic(self.critic) if (
             numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
         self.behavioral_cloning = None  # trainer/behavioral_cloning.py, set by behavior.make_trainer
+        # vector observations without memory on the CPU: gradient steps in numpy (numpy_step.py says why)
+        self._numpy_step = numpy_step.NumpySAC(self) if numpy_step.supports(self) else None
 
     # the recurrent critic's value estimates run sequence by sequence as PPO's (one implementation)
     _value_estimates_by_sequence = PPOTrainer._value_estimates_by_sequence
@@ -273,8 +277,27 @@ class SACTrainer:
             return self.buffer.sample(size, self.sample_generator)
         return self.buffer.sample_sequences(max(size // step, 1), step, self.sample_generator)
 
+    def _rewards(self, batch: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Each signal's reward x strength of the minibatch's rows, float32 [n]: the stored
+        environment reward, or the provider's current reward of the experiences."""
+        experience = self._experience(batch) if self.providers else None
+        rewards = {}
+        for name, (_, strength) in self.hyperparams.reward_signals.items():
+            provider = self.providers.get(name)
+            rewards[name] = (batch["rewards"] if provider is None else provider.evaluate(experience)
+                             ) * np.float32(strength)
+        return rewards
+
     def gradient_step(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
-        """One SAC step on a sampled minibatch (numpy columns of the replay buffer).
+        """One SAC step on a sampled minibatch (numpy columns of the replay buffer): in numpy
+        (numpy_step.py) for vector observations without memory, else in torch autograd."""
+        if self._numpy_step is not None:
+            return self._numpy_step.step(batch, self._rewards(batch))
+        return self._torch_gradient_step(batch)
+
+    def _torch_gradient_step(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
+        """One SAC step in torch autograd (memory, visual observations, a GPU; the reference
+        for numpy_step.py in the tests).
 
         With memory the rows are sequences: the policy starts each from its stored memory, V
         from the stored critic memory, Q1 and Q2 from zero (the reference's choice: they have
@@ -322,13 +345,7 @@ class SACTrainer:
         q1_taken, q2_taken = run(q1, obs, stored), run(q2, obs, stored)
         values = run(self.critic, obs, start=value_memories)
         names = list(self.hyperparams.reward_signals)
-        experience = self._experience(batch) if self.providers else None
-        rewards = {}
-        for name in names:
-            provider = self.providers.get(name)
-            strength = self.hyperparams.reward_signals[name][1]
-            rewards[name] = (t["rewards"] * strength if provider is None else  # the provider's current reward
-                             torch.as_tensor(provider.evaluate(experience) * np.float32(strength), device=self.device))
+        rewards = {name: torch.as_tensor(r, device=self.device) for name, r in self._rewards(batch).items()}
         if self.hyperparams.memory_size:  # from here on, the unpadded rows only
             keep = t["masks"] > 0
 
