@@ -369,7 +369,10 @@ class BehaviorRunner:
     def add_trajectory(self, traj: Trajectory, status: TrainingStatus) -> dict[str, float]:
         """Checkpoint if this trajectory crosses the next interval (named with the step before it),
         then hand it to the trainer (with self-play, an episode's end is also a game for the ELO)."""
-        if self.done:  # inference, or past max_steps while other behaviors still train
+        if not self.training:  # --inference: the steps count (summaries at summary_freq), nothing learns
+            self.trainer.step += len(traj)
+            return {}
+        if self.done:  # past max_steps while other behaviors still train
             return {}
         elo = None
         if self.self_play is not None and len(traj):

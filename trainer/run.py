@@ -462,7 +462,7 @@ class RunState:
         self._last_progress = now
         for r in self.runners.values():
             rewards = r.reward_buffer
-            self.progress.update(r.brain, r.trainer.step, r.max_steps,
+            self.progress.update(r.brain, r.trainer.step, r.max_steps if r.training else None,  # inference: no end
                                  float(np.mean(list(rewards)[-100:])) if rewards else None)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import signal
 import sys
 import textwrap
@@ -123,15 +124,38 @@ def test_train_export_resume_initialize_and_infer(trainer, tmp_path, env_no_prox
     fresh = load_checkpoint(results / "d/Basic/checkpoint.pt")
     assert any(not torch.equal(fresh["Policy"][k], v) for k, v in trained["Policy"].items())
 
-    # --inference: the saved policy plays whole episodes (the progress line's mean reward comes
-    # from finished episodes only); nothing is updated or written
+    # --inference: the saved policy plays whole episodes and its steps count on from the saved
+    # step, with the environment summaries at summary_freq (as mlagents-learn --inference), past
+    # max_steps (900) too; no checkpoint, ONNX or training status is written
     before = saved_files(results / "a/Basic")
     status_before = status_file.read_text()
+    saved_step = resumed["final_checkpoint"]["steps"]
     cmd = [sys.executable, "-m", "trainer.cli", config(tmp_path, trainer, "b.yaml", 900), *common,
            "--run-id", "a", "--inference"]
-    code, text = run_with_signals(cmd, tmp_path, env_no_proxy, [(("Basic: step", "mean reward"), signal.SIGTERM)],
-                                  timeout=120)
+    second = (saved_step // 300 + 2) * 300  # the second summary label of the inference run, > max_steps
+    code, text = run_with_signals(cmd, tmp_path, env_no_proxy,
+                                  [((f"Basic. Step: {second}.", "Not Training."), signal.SIGTERM)], timeout=120)
     assert code == 0, text[-3000:]
-    assert f"at step {resumed['final_checkpoint']['steps']}" in text
+    assert f"at step {saved_step}" in text
+    assert re.search(r"Basic: step [\d,]+ ·", text) and "/900 (" not in text  # the progress line has no end
     assert saved_files(results / "a/Basic") == before
     assert status_file.read_text() == status_before
+    rewards = scalars(results / "a/Basic", "Environment/Cumulative Reward")
+    lengths = scalars(results / "a/Basic", "Environment/Episode Length")
+    inferred = [e.step for e in rewards if e.step > saved_step]
+    assert inferred[:2] == [second - 300, second], inferred
+    assert {e.step for e in lengths} >= {second - 300, second}
+    # basic pays -0.01 a step and +0.1 / +1 at the ends: a finished episode's return is at most 1
+    assert all(-1.0 <= e.value <= 1.0 for e in rewards if e.step > saved_step)
+    assert not any(e.step > saved_step for e in scalars(results / "a/Basic", "Losses/Policy Loss", missing_ok=True))
+
+
+def scalars(folder, tag: str, missing_ok: bool = False) -> list:
+    """The TensorBoard scalars of ``tag`` in a run folder, all event files read back."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(folder), size_guidance={"scalars": 0})
+    acc.Reload()
+    if missing_ok and tag not in acc.Tags()["scalars"]:
+        return []
+    return sorted(acc.Scalars(tag), key=lambda e: e.step)

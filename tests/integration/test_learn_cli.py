@@ -102,7 +102,7 @@ def test_resume_continues_at_saved_step(tmp_path, basic_config, env_no_proxy):
 
 
 @pytest.mark.parametrize("case", ["malformed", "unknown_key", "wrong_type", "missing_env", "missing_yaml",
-                                  "unsupported_feature", "unknown_stub_task"])
+                                  "unknown_stub_task"])
 def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
     cfg = tmp_path / "c.yaml"
     args = [str(cfg), "--env", "stub:basic", "--results-dir", str(tmp_path / "res")]
@@ -122,10 +122,6 @@ def test_bad_input_is_one_message_and_exit_2(tmp_path, case, env_no_proxy):
         expect = "NoSuchGame"
     elif case == "missing_yaml":
         expect = "c.yaml"
-    elif case == "unsupported_feature":  # refused before a simulator is launched, not dropped quietly
-        cfg.write_text("behaviors:\n  Basic:\n    trainer_type: poca\n    network_settings:\n"
-                       "      memory: {memory_size: 16, sequence_length: 4}\n")
-        expect = "'behaviors.Basic.network_settings.memory'"
     elif case == "unknown_stub_task":
         cfg.write_text("behaviors: {}\n")
         args[2] = "stub:nosuch"

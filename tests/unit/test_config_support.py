@@ -65,14 +65,18 @@ def test_sac_is_supported_with_memory_and_intrinsic_signals(tmp_path):
     check_supported(opts)
 
 
-def test_default_settings_are_checked_too(tmp_path):
+def test_poca_with_memory_is_supported_and_default_settings_are_checked_too(tmp_path):
     opts = options(tmp_path, """
         default_settings:
           trainer_type: poca
           network_settings: {memory: {memory_size: 16, sequence_length: 4}}
         behaviors: {}
     """)
-    with pytest.raises(ConfigError, match=r"'default_settings\.network_settings\.memory'"):
+    check_supported(opts)  # POCA trains with memory (docs/poca.md)
+    # the loader knows only the reference's reward signals; one it let through would be refused
+    signals = opts.default_settings.reward_signals
+    signals["foo"] = signals["extrinsic"]
+    with pytest.raises(ConfigError, match=r"'default_settings\.reward_signals\.foo'"):
         check_supported(opts)
 
 

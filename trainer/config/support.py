@@ -20,9 +20,6 @@ SUPPORTED_REWARD_SIGNALS = ("extrinsic", "curiosity", "rnd", "gail")
 def unsupported(ts: TrainerSettings) -> list[tuple[str, str]]:
     """(key path inside a behavior block, what to do) for each unsupported feature ``ts`` uses."""
     found = []
-    if ts.trainer_type == "poca" and ts.network_settings.memory is not None:
-        found.append(("network_settings.memory", "remove it; POCA with an LSTM memory is not implemented yet "
-                                                 "(PPO and SAC train with memory)"))
     for name in ts.reward_signals:
         if name not in SUPPORTED_REWARD_SIGNALS:
             found.append((f"reward_signals.{name}",

@@ -18,6 +18,12 @@ teammates' columns) and reward signal:
 * loss = policy loss + 0.5 (value loss + 0.5 baseline loss) - beta entropy; the value loss is the
   squared error to the returns (anchored at the returns, as PPO's, trainer/ppo/trainer.py says
   why), the baseline's is clipped around the baseline estimates of the trajectory.
+
+With network_settings.memory the actor is PPO's recurrent actor (its memories kept per agent by
+rollout.GroupTracker, exported to ONNX with recurrent_in / recurrent_out) and the critic has an
+LSTM whose value and baseline memories are carried per agent episode across its trajectories
+(``estimates_by_sequence``); experiences are buffered as whole padded sequences with the three
+memories each sequence starts from, and the losses ignore the padding (docs/poca.md).
 """
 from __future__ import annotations
 
@@ -33,7 +39,7 @@ from trainer.poca.networks import POCACritic
 from trainer.ppo.buffer import GroupColumns, Trajectory
 from trainer.ppo.gae import gae
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
+from trainer.ppo.losses import masked_mean, policy_loss, ppo_loss, value_loss
 from trainer.ppo.trainer import PPOTrainer, _obs_key
 
 GROUP_FIELDS = ("mates_continuous", "mates_discrete", "mates_present")
@@ -74,8 +80,6 @@ class POCATrainer(PPOTrainer):
 
     def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams,
                  seed: int, device: str = "cpu"):
-        if hyperparams.memory_size:
-            raise ConfigError(f"behavior {brain_name!r}: POCA with network_settings.memory is not implemented yet")
         if hyperparams.shared_critic:
             raise ConfigError(f"behavior {brain_name!r}: POCA has no shared_critic (its critic sees the group)")
         super().__init__(brain_name, behavior_spec, hyperparams, seed, device, use_numpy_update=False)
@@ -89,21 +93,61 @@ class POCATrainer(PPOTrainer):
     # ------------------------------------------------------------------ experience
     def estimates(self, traj: Trajectory, group: GroupColumns) -> tuple[dict, dict, dict]:
         """(values [T], baselines [T], value after the last step) per reward signal."""
+        with torch.inference_mode():
+            own, mates, actions, present, everyone, with_self, after, after_present = self._group_tensors(traj, group)
+            values = self.critic.value(everyone, with_self)
+            baselines = self.critic.baseline(own, mates, *actions, present)
+            next_values = self.critic.value(after, after_present)
+        return ({k: v.cpu().numpy() for k, v in values.items()}, {k: v.cpu().numpy() for k, v in baselines.items()},
+                {k: float(v[0]) for k, v in next_values.items()})
+
+    def _group_tensors(self, traj: Trajectory, group: GroupColumns) -> tuple:
+        """The critic's inputs of a trajectory: own obs [T, *s], teammates' obs [T, M, *s], their
+        actions, present [T, M], the whole group's obs [T, 1 + M, *s] and present, and the group
+        after the last step ([1, 1 + M2, *s], [1, 1 + M2])."""
         t = lambda a: torch.as_tensor(np.asarray(a), device=self.device)  # noqa: E731
         own = [t(np.asarray(o, np.float32)) for o in traj.obs]
         mates = [t(o) for o in group.obs]
         present = t(group.present)
         everyone = [torch.cat([o.unsqueeze(1), m], dim=1) for o, m in zip(own, mates)]
-        with_self = with_agent(present)
         after = [torch.cat([t(np.asarray(n, np.float32))[None], t(m)], dim=0)[None]
                  for n, m in zip(traj.next_obs, group.next_obs)]
         after_present = t(np.concatenate([[True], group.next_present]))[None]
+        actions = (t(group.continuous_actions), t(group.discrete_actions))
+        return own, mates, actions, present, everyone, with_agent(present), after, after_present
+
+    def estimates_by_sequence(self, traj: Trajectory, group: GroupColumns) -> tuple[dict, dict, dict, np.ndarray, np.ndarray]:
+        """``estimates`` of a recurrent critic, run sequence by sequence as PPO's
+        (``_value_estimates_by_sequence``): the value and the baseline each carry their own
+        memory on from the agent's previous trajectory of the episode. Also returns the critic
+        and the baseline memory each step's sequence starts from ([T, m] each)."""
+        length, step, size = len(traj), self.sequence_length, self.hyperparams.memory_size
+        zeros = torch.zeros((1, 1, size), device=self.device)
+        value_memory, baseline_memory = self._critic_memory.pop(traj.episode, (zeros, zeros))
+        value_starts = np.zeros((length, size), np.float32)
+        baseline_starts = np.zeros((length, size), np.float32)
+        values: dict[str, list] = {}
+        baselines: dict[str, list] = {}
         with torch.inference_mode():
-            values = self.critic.value(everyone, with_self)
-            baselines = self.critic.baseline(own, mates, t(group.continuous_actions), t(group.discrete_actions), present)
-            next_values = self.critic.value(after, after_present)
-        return ({k: v.cpu().numpy() for k, v in values.items()}, {k: v.cpu().numpy() for k, v in baselines.items()},
-                {k: float(v[0]) for k, v in next_values.items()})
+            own, mates, actions, present, everyone, with_self, after, after_present = self._group_tensors(traj, group)
+            for begin in range(0, length, step):  # the last sequence may be short
+                end = min(begin + step, length)
+                value_starts[begin:end] = value_memory[0, 0].cpu().numpy()
+                baseline_starts[begin:end] = baseline_memory[0, 0].cpu().numpy()
+                v, value_memory = self.critic.value_memory([e[begin:end] for e in everyone], with_self[begin:end],
+                                                           value_memory, end - begin)
+                b, baseline_memory = self.critic.baseline_memory(
+                    [o[begin:end] for o in own], [m[begin:end] for m in mates], actions[0][begin:end],
+                    actions[1][begin:end], present[begin:end], baseline_memory, end - begin)
+                for name in v:
+                    values.setdefault(name, []).append(v[name])
+                    baselines.setdefault(name, []).append(b[name])
+            next_values, _ = self.critic.value_memory(after, after_present, value_memory, 1)
+        if not traj.done:
+            self._critic_memory[traj.episode] = (value_memory, baseline_memory)
+        return ({k: torch.cat(v).cpu().numpy() for k, v in values.items()},
+                {k: torch.cat(v).cpu().numpy() for k, v in baselines.items()},
+                {k: float(v[0]) for k, v in next_values.items()}, value_starts, baseline_starts)
 
     def process_trajectory(self, traj: Trajectory) -> dict[str, float]:
         """Normalise, estimate values and baselines, lambda returns and advantages per reward
@@ -115,7 +159,10 @@ class POCATrainer(PPOTrainer):
             obs_tensors = self._tensors(traj.obs)
             self.policy.actor.update_normalization(obs_tensors)
             self.critic.update_normalization(obs_tensors)
-        values, baselines, next_values = self.estimates(traj, group)
+        if self.hyperparams.memory_size:
+            values, baselines, next_values, critic_memories, baseline_memories = self.estimates_by_sequence(traj, group)
+        else:
+            values, baselines, next_values = self.estimates(traj, group)
         group_over = traj.done and not traj.interrupted and group.all_done
         fields: dict[str, np.ndarray] = {_obs_key(i): np.asarray(o, np.float32) for i, o in enumerate(traj.obs)}
         experience = self._provider_experience(traj, fields)
@@ -142,6 +189,14 @@ class POCATrainer(PPOTrainer):
         fields["mates_continuous"] = pad_mates(group.continuous_actions.astype(np.float32), width)
         fields["mates_discrete"] = pad_mates(group.discrete_actions.astype(np.int64), width)
         fields["mates_present"] = pad_mates(group.present, width)
+        if self.hyperparams.memory_size:  # whole sequences, as PPO's: zeros after the last step, masks 0
+            fields["memory"] = np.asarray(traj.memories, np.float32)
+            fields["critic_memory"] = critic_memories
+            fields["baseline_memory"] = baseline_memories
+            fields["masks"] = np.ones(len(traj), dtype=np.float32)
+            pad = -len(traj) % self.sequence_length
+            if pad:
+                fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
         self.buffer.append(fields)
         self.step += len(traj)
         return stats
@@ -163,21 +218,33 @@ class POCATrainer(PPOTrainer):
         mates = [batch[_mates_obs_key(i)] for i in range(n_obs)]
         present = batch["mates_present"]
         allowed = batch["allowed"] if self.behavior_spec.action_spec.discrete_branches else None
-        log_probs, entropy = self.policy.evaluate(obs, allowed, batch["continuous_actions"], batch["discrete_actions"])
         everyone = [torch.cat([o.unsqueeze(1), m], dim=1) for o, m in zip(obs, mates)]
-        values = self.critic.value(everyone, with_agent(present))
-        baselines = self.critic.baseline(obs, mates, batch["mates_continuous"], batch["mates_discrete"], present)
+        actions = (batch["mates_continuous"], batch["mates_discrete"])
+        mask = None
+        if self.hyperparams.memory_size:  # rows are whole sequences; each starts from its stored memories
+            step = self.sequence_length
+            mask = batch["masks"]
+            start = lambda key: batch[key][::step].unsqueeze(0)  # noqa: E731
+            log_probs, entropy = self.policy.evaluate(obs, allowed, batch["continuous_actions"],
+                                                      batch["discrete_actions"], start("memory"), step)
+            values, _ = self.critic.value_memory(everyone, with_agent(present), start("critic_memory"), step)
+            baselines, _ = self.critic.baseline_memory(obs, mates, *actions, present, start("baseline_memory"), step)
+        else:
+            log_probs, entropy = self.policy.evaluate(obs, allowed, batch["continuous_actions"],
+                                                      batch["discrete_actions"])
+            values = self.critic.value(everyone, with_agent(present))
+            baselines = self.critic.baseline(obs, mates, *actions, present)
         names = list(values)
         returns = {n: batch[f"returns:{n}"] for n in names}
-        policy_term = policy_loss(batch["advantages"], log_probs, batch["log_probs"], epsilon)
-        value_term = value_loss(values, returns, returns, epsilon)
-        baseline_term = value_loss(baselines, {n: batch[f"baselines:{n}"] for n in names}, returns, epsilon)
-        loss = ppo_loss(policy_term, value_term + 0.5 * baseline_term, entropy, beta)
+        policy_term = policy_loss(batch["advantages"], log_probs, batch["log_probs"], epsilon, mask)
+        value_term = value_loss(values, returns, returns, epsilon, mask)
+        baseline_term = value_loss(baselines, {n: batch[f"baselines:{n}"] for n in names}, returns, epsilon, mask)
+        loss = ppo_loss(policy_term, value_term + 0.5 * baseline_term, entropy, beta, mask)
         return loss, {
             "Losses/Policy Loss": abs(policy_term.item()),
             "Losses/Value Loss": value_term.item(),
             "Losses/Baseline Loss": baseline_term.item(),
-            "Policy/Entropy": entropy.mean().item(),
+            "Policy/Entropy": masked_mean(entropy, mask).item(),
         }
 
     # ------------------------------------------------------------------ persistence
