@@ -5,7 +5,7 @@
                    [--spin-wait-ms MS] [--transport {http2,grpcio}]
     unity-stub-env --task mirror --spec behaviors.json --mlagents-port P    (or --task mirror=FILE)
     unity-stub-env --list
-    unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random [--episodes N] [--seed S] [--json F]
+    unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random|scripted [--episodes N] [--seed S] [--json F]
                    [--evaluate-option KEY=VALUE]
     unity-stub-env --task basic|ball3d|... --record-demo OUT.demo --policy MODEL.onnx|scripted
                    [--demo-steps N] [--seed S] [--num-areas N] [--env-param KEY=NUMBER] [--demo-noise S]  (see unity_stub_env.record_demo)
@@ -70,7 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--list", action="store_true", help="list the tasks with their specs and exit")
     parser.add_argument("--evaluate", action="append", metavar="POLICY", default=None,
                         help="run --task's scripted evaluation (no trainer) with POLICY: a trained .onnx, "
-                             "'zero' or 'random' (the last two are always shown beside it); repeatable")
+                             "'zero', 'random' (these two are always shown beside it) or 'scripted' (mimic's balance "
+                             "expert); repeatable")
     parser.add_argument("--episodes", type=int, default=None,
                         help="--evaluate: dodge: random throws after the scripted ones (default 500); "
                              "mimic: trials per motion and push (default 32)")

@@ -2,7 +2,9 @@
 
 POLICY is a trained ``.onnx`` file (the model a run exports; run with onnxruntime, taking the
 ONNX contract's ``deterministic_continuous_actions``, i.e. the mean action), ``zero`` (every action
-0) or ``random`` (uniform in [-1, 1], seeded). ``--evaluate`` may be repeated; the zero and random
+0), ``random`` (uniform in [-1, 1], seeded) or ``scripted`` (the task's hand-written expert from
+its observations: mimic's ``BalanceExpert``, standing with an ankle strategy against pushes, in the
+default absolute mode). ``--evaluate`` may be repeated; the zero and random
 baselines are always evaluated beside it. Printed per policy, for the scripted and the random
 throws: hit rate, the hit rate of the throws aimed above the pelvis (with their count: the ones
 fixed feet leave dodgeable), balance-loss rate, pass rate, mean effort (the effort terms' magnitudes summed
@@ -43,6 +45,15 @@ OPTIONS = {"mimic": ("residual",)}
 # Rows a task evaluates beside the baselines: label -> (policy, the task's evaluate options).
 # mimic: zero actions in residual mode, i.e. the PD controllers tracking the reference unaided.
 EXTRA_ROWS = {"mimic": {"reference PD": ("zero", {"residual": 1.0})}}
+
+
+def scripted_policy(task_name: str) -> Callable[[np.ndarray], np.ndarray]:
+    """The task's hand-written expert acting on observations (``--evaluate scripted``)."""
+    if task_name != "mimic":
+        raise PolicyError(f"policy 'scripted': task {task_name} has no scripted expert for --evaluate (mimic has)")
+    from unity_stub_env.tasks.mimic import BalanceExpert
+
+    return BalanceExpert()
 
 
 def load_policy(spec: str, observation_size: int, action_size: int, seed: int) -> Callable[[np.ndarray], np.ndarray]:
@@ -117,7 +128,8 @@ def run(task_name: str, policies: list[str], seed: int, episodes: int | None, js
     names = list(dict.fromkeys([*policies, *BASELINES]))
     try:
         options = parse_options(task_name, option_pairs or [])
-        actors = {name: load_policy(name, observation_size, action_size, seed) for name in names}
+        actors = {name: scripted_policy(task_name) if name == "scripted" else
+                  load_policy(name, observation_size, action_size, seed) for name in names}
         results = {name: evaluate(actors[name], seed=seed, episodes=episodes, **options) for name in names}
         for label, (policy, extra) in EXTRA_ROWS.get(task_name, {}).items():
             results[label] = evaluate(actors[policy], seed=seed, episodes=episodes, **{**options, **extra})

@@ -13,7 +13,8 @@ closes its episode. Recording stops after the first whole episode that brings th
 Policies: ``scripted`` is a hand-written expert (``SCRIPTED``): ``basic`` walks right to the
 large goal (the optimal return 0.93), ``ball3d`` is a proportional-derivative controller that
 tilts the plate under the ball, ``mimic`` sets the PD targets on the reference clip (the "reference PD"
-of ``--evaluate``). ``--env-param KEY=NUMBER`` sets environment parameters, e.g. mimic's ``motion``.
+of ``--evaluate``), and for ``stand`` balances against pushes (``BalanceExpert``, ``--evaluate
+scripted``). ``--env-param KEY=NUMBER`` sets environment parameters, e.g. mimic's ``motion``.
 ``--demo-noise SIGMA`` (continuous actions): the agents act with the policy's action plus Gaussian
 noise of std SIGMA (clipped to [-1, 1]) while the file records the policy's own action, as DART
 (Laskey et al. 2017) does: the demonstration then also shows how the expert recovers from the
@@ -78,9 +79,18 @@ def _ball3d_expert(task: Task) -> Act:
 def _mimic_expert(task: Task) -> Act:
     """The reference PD: each decision the PD targets are the reference clip's joint angles at the
     frame the decision leads to, through the inverse of the task's action map (the ``motion``
-    environment parameter chooses the clip: ``--env-param motion=2``)."""
+    environment parameter chooses the clip: ``--env-param motion=2``). Agents standing (motion 0)
+    in the default absolute mode act with ``BalanceExpert`` instead, the stand pose plus an ankle
+    strategy against pushes (``--env-param push_impulse=15``)."""
+    from unity_stub_env.tasks.mimic import BalanceExpert
+
+    balance = BalanceExpert()
+
     def act(obs, mask):
         continuous = task.reference_actions().astype(np.float32)
+        standing = (task.motion == 0) & (task.residual == 0)
+        if standing.any():
+            continuous[standing] = balance(obs[0][standing])
         return continuous, np.zeros((len(continuous), 0), np.int32)
     return act
 

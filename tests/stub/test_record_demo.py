@@ -155,3 +155,18 @@ def test_demo_noise_acts_noisily_but_records_the_experts_clean_actions(tmp_path)
         frame = round(phase * frames)
         expected = task.absolute_actions(task.ref.joints[offset + (frame + 1) % frames][None].repeat(task.num_agents, 0))[0]
         np.testing.assert_allclose(list(pair.action_info.continuous_actions), expected, atol=1e-6)
+
+
+def test_mimic_expert_balances_the_pushed_stand_and_records_what_it_saw(tmp_path):
+    from unity_stub_env.tasks.mimic import BalanceExpert
+
+    path = str(tmp_path / "stand.demo")
+    steps, episodes, mean = record_demo.record("mimic", path, "scripted", steps=400,
+                                               env_params=["motion=0", "push_impulse=15"])
+    assert (steps, episodes) == (501, 1) and mean > 490  # 10 s kept under five pushes; r_r ~0.99 a decision
+    pairs = [p for p in read_demo(path).pairs if not p.agent_info.done]
+    obs = np.array([list(p.agent_info.observations[0].float_data.data) for p in pairs], np.float32)
+    actions = np.array([list(p.action_info.continuous_actions) for p in pairs])
+    np.testing.assert_allclose(actions, BalanceExpert()(obs), atol=1e-6)  # each record: the expert's answer to it
+    ankles = [18, 19, 24, 25]  # ankle_x_r, ankle_y_r, ankle_x_l, ankle_y_l: the only joints it moves
+    assert np.abs(np.delete(actions, ankles, axis=1)).max() == 0.0 and np.abs(actions[:, ankles]).max() > 0.1

@@ -13,11 +13,14 @@ from unity_stub_env.tasks import TASKS, make_task
 from unity_stub_env.tasks.base import EnvironmentParameters
 from unity_stub_env.tasks.mimic import (
     CONTROL_DT,
+    OBSERVED,
     SCALES,
     XML_PATH,
+    BalanceExpert,
     MimicTask,
     cross,
     quat_angle,
+    quat_matrix,
     quat_mul,
     reward_terms,
     run_trials,
@@ -219,6 +222,62 @@ def test_pushes_apply_the_impulse_at_their_interval():
         else:
             assert not pushed.last_push.any()
     assert (pushed.data.xfrc_applied == 0).all()  # the force lasts one decision
+
+
+def _balance_obs(velocity, yaw: float = 0.0) -> np.ndarray:
+    """One observation: pelvis turned by yaw about z, feet 0.09 m either side 0.9 m below, every other
+    part at the pelvis, every part moving at ``velocity`` (pelvis frame)."""
+    obs = np.zeros((1, 170), np.float32)
+    parts = obs[0, :169].reshape(13, 13)
+    parts[:, 0] = 1.0  # identity local rotations
+    parts[0, 0:4] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+    parts[:, 4:7] = velocity
+    parts[OBSERVED.index("foot_r"), 10:13] = (0.09, 0.0, -0.9)
+    parts[OBSERVED.index("foot_l"), 10:13] = (-0.09, 0.0, -0.9)
+    parts[0, 10:13] = (0.0, 0.0, 0.95)  # the pelvis' slot: its height
+    return obs
+
+
+def test_balance_expert_presses_the_soles_towards_the_capture_point_by_hand():
+    np.testing.assert_allclose(quat_matrix(np.array([[math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)]])),
+                               [[[0, -1, 0], [1, 0, 0], [0, 0, 1]]], atol=1e-12)  # 90 deg about z
+    expert = BalanceExpert()
+    ankle_x, ankle_y = JOINTS.index("ankle_x_r"), JOINTS.index("ankle_y_r")
+    ankle_xl, ankle_yl = JOINTS.index("ankle_x_l"), JOINTS.index("ankle_y_l")
+    omega = math.sqrt(9.81 / 0.93)  # 3.2478 /s
+    # moving forward at 0.3 m/s over the feet' midpoint: xi_y = 0.3 / 3.2478 = 0.09237 m, both ankles
+    # plantar-flex to -1.5 * 0.09237 = -0.13856 rad, action -0.13856 / 50 deg (0.87266 rad) = -0.15878;
+    # the same whatever the heading (the velocity is in the pelvis frame)
+    for yaw in (0.0, 1.2):
+        xi = expert.capture_point(_balance_obs((0.0, 0.3, 0.0), yaw))
+        np.testing.assert_allclose(xi, [[0.0, 0.3 / omega]], atol=1e-6)
+        action = expert(_balance_obs((0.0, 0.3, 0.0), yaw))
+        np.testing.assert_allclose(action[0, [ankle_x, ankle_xl]], -0.15878, atol=1e-4)
+        assert np.abs(np.delete(action[0], [ankle_x, ankle_xl])).max() == 0.0
+    # moving right at 0.2 m/s: xi_x = 0.06158 m; the right soles' edges go down: ankle_y_r to -0.09237 rad
+    # (action -0.09237 / 25 deg (0.43633 rad) = -0.21170), ankle_y_l to +0.09237 (+0.21170)
+    action = expert(_balance_obs((0.2, 0.0, 0.0)))
+    np.testing.assert_allclose(action[0, [ankle_y, ankle_yl]], [-0.21170, 0.21170], atol=1e-4)
+    # at rest, every part but the pelvis (9.94 kg) and the feet (0.931 kg each) 0.05 m forward:
+    # the CoM is 0.05 * (70 - 9.94 - 1.862) / 70 = 0.041570 m ahead of the feet (the pelvis' slot is its height)
+    obs = _balance_obs((0.0, 0.0, 0.0))
+    parts = obs[0, :169].reshape(13, 13)
+    others = [i for i, name in enumerate(OBSERVED) if name not in ("pelvis", "foot_r", "foot_l")]
+    parts[others, 11] = 0.05
+    np.testing.assert_allclose(expert.capture_point(obs), [[0.0, 0.041570]], atol=1e-6)
+    # the neutral standing pose at rest, as the task observes it: no correction
+    task = _task(motion=0, rsi=0)
+    assert np.abs(expert.capture_point(task.observe()[0])).max() < 2e-3
+    assert np.abs(expert(task.observe()[0])).max() < 0.01
+
+
+def test_balance_expert_keeps_standing_under_pushes_that_topple_zero_actions():
+    # 15 N s every 2 s, 8 trials (seed 0): zero actions (the stand pose) keep 3 of 8 (measured), the
+    # ankle strategy all 8 (bench/RESULTS.md, 2026-11-27)
+    expert = run_trials(BalanceExpert(), motion=0, trials=N, seed=0, push_impulse=15.0)
+    zero = run_trials(lambda obs: np.zeros((len(obs), 26)), motion=0, trials=N, seed=0, push_impulse=15.0)
+    assert expert["balance_kept"] == 1.0 and expert["r_r"] > 0.98
+    assert zero["balance_kept"] <= 0.5
 
 
 def test_spec_list_and_bad_motion():

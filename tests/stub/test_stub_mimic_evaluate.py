@@ -74,3 +74,5 @@ def test_evaluate_options_reach_the_task_and_bad_ones_exit_2(tmp_path, capsys):
     assert "'high' is not a number" in capsys.readouterr().err
     assert main(["--task", "dodge", "--evaluate", "zero", "--evaluate-option", "residual=1"]) == 2
     assert "task dodge takes no options" in capsys.readouterr().err
+    assert main(["--task", "dodge", "--evaluate", "scripted"]) == 2
+    assert "task dodge has no scripted expert" in capsys.readouterr().err
