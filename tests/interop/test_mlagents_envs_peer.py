@@ -49,14 +49,24 @@ DOCUMENTED_SPECS = {
                                "name": "VectorSensor_size12"}],
         "action_spec": {"continuous_size": 0, "discrete_branches": [3, 3]},
     } for team in (0, 1)},
+    "soccer_twos": {f"SoccerTwos?team={team}": {  # two players per team, each team one group
+        "observation_specs": [{"shape": [16], "dimension_property": [1], "observation_type": 0,
+                               "name": "VectorSensor_size16"}],
+        "action_spec": {"continuous_size": 0, "discrete_branches": [3, 3]},
+    } for team in (0, 1)},
     "pushblock": {"PushBlock?team=0": {
         "observation_specs": [{"shape": [11], "dimension_property": [1], "observation_type": 0,
                                "name": "VectorSensor_size11"}],
         "action_spec": {"continuous_size": 0, "discrete_branches": [5]},
     }},
+    "dungeon": {"Dungeon?team=0": {
+        "observation_specs": [{"shape": [18], "dimension_property": [1], "observation_type": 0,
+                               "name": "VectorSensor_size18"}],
+        "action_spec": {"continuous_size": 0, "discrete_branches": [5]},
+    }},
 }
 AGENTS = {"basic": 1, "ball3d": 12, "dodge": 14, "mimic": 8, "runner": 4, "creature": 1,
-          "soccer": 2, "pushblock": 2}  # agents per area over all its behaviors; one area by default
+          "soccer": 2, "soccer_twos": 4, "pushblock": 2, "dungeon": 3}  # agents per area over all its behaviors; one area by default
 STEPS = 500
 
 

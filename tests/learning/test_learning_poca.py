@@ -34,3 +34,30 @@ def test_poca_pushes_the_block_home_within_40k_steps(tmp_path, env_no_proxy):
     assert curve[0][1] < 0.0, curve
     assert curve[-1][1] >= 0.5 and curve[-1][1] - curve[0][1] >= 1.0, curve
     assert success[0] == 0.0 and success[-1] >= 0.3, success
+
+
+def test_poca_learns_the_sacrifice_within_28k_steps(tmp_path, env_no_proxy):
+    """configs/dungeon_poca.yaml cut to 28,000 steps, 8 areas (24 agents), seed 1. Random actions
+    escape in about 21 % of the group episodes (tests/stub/test_stub_dungeon.py); the escape needs
+    one agent to be eaten first, whose own episode ends with nothing paid, so only the credit POCA
+    gives it for its group's later +1 teaches it (independent PPO: bench/RESULTS.md). Thresholds:
+    the first summary's success rate below 0.6, the last at least 0.8 and 0.3 above the first, and
+    the per-agent return (Policy/Extrinsic Reward, at most 0.75: three of the four agent episodes of
+    an escape earn the +1) at least 0.25 above the first summary's (measured, seed 1, the same numbers
+    on a rerun: success 0.40 at 4k -> 0.92 at 28k, return 0.26 -> 0.69)."""
+    cfg = tmp_path / "dungeon.yaml"
+    text = (ROOT / "configs" / "dungeon_poca.yaml").read_text().replace("max_steps: 60000", "max_steps: 28000")
+    cfg.write_text(text)
+    assert "max_steps: 28000" in text
+    r = learn([str(cfg), "--env", "stub:dungeon", "--num-areas", "8", "--seed", "1", "--run-id", "d",
+               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
+              cwd=tmp_path, timeout=600, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    acc = EventAccumulator(str(tmp_path / "results" / "d" / "Dungeon"), size_guidance={"scalars": 0})
+    acc.Reload()
+    success = [(e.step, e.value) for e in acc.Scalars("Dungeon/Success")]
+    returns = [e.value for e in acc.Scalars("Policy/Extrinsic Reward")]
+    print(success, returns)
+    assert success[-1][0] == 28000
+    assert success[0][1] < 0.6 and success[-1][1] >= 0.8 and success[-1][1] - success[0][1] >= 0.3, success
+    assert returns[-1] - returns[0] >= 0.25, returns

@@ -1,5 +1,6 @@
-"""Self-play learning proof on the ``soccer`` stub task (1 v 1): our trainer, the stub as a
-separate process over real gRPC, 16 pitches, seed 1, a bounded number of steps.
+"""Self-play learning proofs on the ``soccer`` stub task (1 v 1, PPO) and on ``soccer_twos`` (2 v 2,
+MA-POCA, each team one agent group): our trainer, the stub as a separate process over real gRPC,
+16 pitches, a fixed seed, a bounded number of steps.
 
 configs/soccer.yaml cut to 60,000 steps. Two numbers a user would look at:
 
@@ -71,3 +72,56 @@ def test_soccer_selfplay_elo_rises_and_the_policy_beats_a_random_player(tmp_path
     wins, losses, _ = play_match(make_task("soccer", num_areas=16, seed=5),
                                  onnx_player(tmp_path / "results" / "s" / "Soccer.onnx"), random_player(2), 1000)
     assert wins >= 100 and wins >= 5 * losses, (wins, losses, baseline)
+
+
+TWOS_STEPS = 100000
+
+
+# 100,000 steps take longer than the 1 v 1's 60,000 (this test: 2 min 10 s at load 8, 8 min 16 s at
+# load 19): the default 300 s is not enough on a machine shared by several trainings
+@pytest.mark.timeout(900)
+def test_soccer_twos_poca_selfplay_elo_rises_and_the_team_beats_a_random_team(tmp_path, env_no_proxy):
+    """configs/soccer_twos.yaml (MA-POCA + self_play) cut to 100,000 steps, seed 2. A goal is two
+    games (one per player of the learning group, rated once the group's episode is over), and only
+    the learning team's 2 players per pitch count as steps, so the rating moves about half as fast
+    per step as on the 1 v 1, and over 100k steps its noise (a few hundred games of about +-0.5
+    points) is roughly +-10. 60,000 steps were not enough (seven runs at or through 60k: ELO
+    1205.7-1229.7; of five final policies played against the random team three lost to it:
+    19 : 37, 11 : 14, 44 : 80).
+
+    Measured, this test (run three times, the same numbers every time): ELO 1205.3 at 10k, at most 1216.8
+    (60k), 1211.7 at 100k; the exported ONNX (deterministic) against a team of two players choosing
+    uniformly at random, 16 pitches, 1,000 decisions: 266 goals for, 41 against (at 50k still even,
+    48 : 50; random against random 21 : 23 in 400 decisions). Runs with a larger max_steps decay
+    beta and epsilon more slowly and learn differently: seed 2 with max_steps 150k gave ELO 1264.5
+    at 100k (1232.0 with batch_size 256), 236 : 52 and 234 : 9 against random; bench/RESULTS.md has
+    a 300k run (seed 1: 1243.0 at 100k, 1342.2 at 300k).
+
+    Thresholds: ELO at the last summary >= 1208 (+8 over initial_elo: this seed's slow rise, near
+    the rating's noise; the win over the random team is the stronger part); against the random team
+    >= 100 goals and at least twice as many as conceded."""
+    from unity_stub_env.tasks import make_task
+    from unity_stub_env.tasks.soccer import play_match
+
+    cfg = tmp_path / "soccer_twos.yaml"
+    text = (ROOT / "configs" / "soccer_twos.yaml").read_text()
+    cfg.write_text(text.replace("max_steps: 300000", f"max_steps: {TWOS_STEPS}"))
+    assert f"max_steps: {TWOS_STEPS}" in cfg.read_text() and "trainer_type: poca" in text
+    r = learn([str(cfg), "--env", "stub:soccer_twos", "--num-areas", "16", "--seed", "2", "--run-id", "t",
+               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
+              cwd=tmp_path, timeout=900, env=env_no_proxy)
+    assert r.returncode == 0, r.stderr[-3000:]
+    acc = EventAccumulator(str(tmp_path / "results" / "t" / "SoccerTwos"), size_guidance={"scalars": 0})
+    acc.Reload()
+    elo = [(e.step, e.value) for e in acc.Scalars("Self-play/ELO")]
+    print(elo)
+    assert elo[-1][0] == TWOS_STEPS
+    assert abs(elo[0][1] - 1200) < 10, elo
+    assert elo[-1][1] >= 1208, elo
+
+    baseline = play_match(make_task("soccer_twos", num_areas=16, seed=5), random_player(1), random_player(2), 400)
+    assert baseline[0] < 3 * max(baseline[1], 1) and baseline[1] < 3 * max(baseline[0], 1), baseline
+    wins, losses, _ = play_match(make_task("soccer_twos", num_areas=16, seed=5),
+                                 onnx_player(tmp_path / "results" / "t" / "SoccerTwos.onnx"), random_player(2), 1000)
+    print(wins, losses, baseline)
+    assert wins >= 100 and wins >= 2 * losses, (wins, losses, baseline)

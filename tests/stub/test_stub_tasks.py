@@ -19,7 +19,8 @@ def _basic_run(task, actions):
 
 
 def test_registry_and_specs():
-    assert sorted(TASKS) == ["ball3d", "basic", "creature", "dodge", "mimic", "pushblock", "runner", "soccer"]
+    assert sorted(TASKS) == ["ball3d", "basic", "creature", "dodge", "dungeon", "mimic", "pushblock", "runner", "soccer",
+                            "soccer_twos"]
     basic, ball = make_task("basic", num_areas=3, seed=0), make_task("ball3d", num_areas=2, seed=0)
     assert (basic.behavior_name, basic.num_agents, basic.action_spec.discrete_branches) == ("Basic", 3, (3,))
     assert basic.observation_specs[0].shape == (20,)

@@ -13,7 +13,7 @@ from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
 from trainer.config.settings import SelfPlaySettings
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer
-from trainer.selfplay import SelfPlay, TeamController, elo_change, game_result
+from trainer.selfplay import ELO_STAT, SelfPlay, TeamController, elo_change, game_result
 
 SPEC = BehaviorSpec(
     (ObservationSpec((4,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "vector"),),
@@ -253,3 +253,63 @@ def test_resume_without_the_window_takes_the_elo_of_training_status(tmp_path):
     status.set_elo("Soccer", 1350.0)
     again.resume(status)
     assert again.self_play.elos == [1.0, 2.0, 3.0, 1401.0]
+
+
+# ------------------------------------------------------------------------ a team of two (POCA)
+def _steps(ids, group_reward, terminal=False, interrupted=False):
+    from protos.types import DecisionSteps, TerminalSteps
+
+    n = len(ids)
+    common = dict(obs=[np.zeros((n, 4), np.float32)], reward=np.zeros(n, np.float32),
+                  agent_id=np.array(ids, np.int64), group_id=np.ones(n, np.int32),
+                  group_reward=np.full(n, group_reward, np.float32))
+    if terminal:
+        return TerminalSteps(interrupted=np.full(n, interrupted), **common)
+    return DecisionSteps(action_mask=None, **common)
+
+
+def test_a_team_of_two_is_rated_once_per_player_when_its_group_game_ends(tmp_path):
+    """soccer_twos' shape (unity_stub_env/tasks/soccer.py): the learning team's two players are one
+    agent group, a goal ends both episodes with a group reward, no individual reward. As the
+    reference's ghost trainer: each player's trajectory that ends with its whole group done (and not
+    interrupted) is one game, so a goal is two games; a timeout none."""
+    from protos.types import TerminalSteps
+    from trainer.artifacts.training_status import TrainingStatus
+    from trainer.behavior import BehaviorRunner
+    from trainer.config.settings import TrainerSettings
+    from trainer.rollout import GroupTracker
+
+    settings = TrainerSettings(trainer_type="poca", self_play=SelfPlaySettings(window=3, initial_elo=1200.0))
+    runner = BehaviorRunner.create("SoccerTwos", SPEC, settings, str(tmp_path), seed=0, device="cpu", training=True)
+    runner.next_checkpoint = 10**9
+    sp, status = runner.self_play, TrainingStatus()
+    sp.add_team(0)
+    sp.add_team(1)  # team 0 learns, team 1 plays the first snapshot (rated 1200)
+    tracker = GroupTracker(SPEC, time_horizon=64)
+    none = TerminalSteps.empty(SPEC)
+    trajectories = []
+
+    def play(end_reward, interrupted=False):
+        """One group episode of players 1 and 2: two decisions, then both end together."""
+        for _ in range(2):
+            slots = tracker.on_step(none, _steps([1, 2], 0.0), trajectories.append)
+            tracker.on_actions(slots, np.zeros((2, 0), np.float32), np.zeros((2, 2), np.int32),
+                               np.zeros((2, 2), np.float32), None)
+        tracker.on_step(_steps([1, 2], end_reward, terminal=True, interrupted=interrupted),
+                        _steps([], 0.0), trajectories.append)
+        ended, trajectories[:] = list(trajectories), []
+        assert len(ended) == 2 and all(t.done and t.group.all_done for t in ended)
+        return [runner.add_trajectory(t, status).get(ELO_STAT) for t in ended]
+
+    # a goal in the 100th control step: +1 - 99 / 250 for both players = two wins against 1200
+    first = 1200.0 + 0.5
+    expected = 1 / (1 + 10 ** ((1199.5 - first) / 400))  # 0.50144 after the first game
+    assert play(1 - 99 / 250) == [pytest.approx(first), pytest.approx(first + 1 - expected)]
+    assert sp.elos[0] == pytest.approx(1200.0 - 0.5 - (1 - expected))  # the snapshot lost both
+    before = list(sp.elos)
+    assert play(0.0, interrupted=True) == [None, None]  # a timeout is no game
+    assert sp.elos == before
+    lost = play(-1.0)  # conceded: two losses, each moving the learner down by its expected score
+    e1 = 1 / (1 + 10 ** ((before[0] - before[-1]) / 400))
+    assert lost[0] == pytest.approx(before[-1] - e1)
+    assert lost[1] < lost[0] and sp.elos[0] > before[0]

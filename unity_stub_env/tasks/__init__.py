@@ -13,10 +13,11 @@ from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
 from unity_stub_env.tasks.basic import BasicTask
 from unity_stub_env.tasks.creature import CreatureTask
 from unity_stub_env.tasks.dodge import DodgeTask
+from unity_stub_env.tasks.dungeon import DungeonTask
 from unity_stub_env.tasks.mimic import MimicTask
 from unity_stub_env.tasks.pushblock import PushBlockTask
 from unity_stub_env.tasks.runner import RunnerTask
-from unity_stub_env.tasks.soccer import SoccerTask
+from unity_stub_env.tasks.soccer import SoccerTask, SoccerTwosTask
 
 TASKS: dict[str, type[Task]] = {
     BasicTask.name: BasicTask,
@@ -26,7 +27,9 @@ TASKS: dict[str, type[Task]] = {
     MimicTask.name: MimicTask,
     RunnerTask.name: RunnerTask,
     SoccerTask.name: SoccerTask,
+    SoccerTwosTask.name: SoccerTwosTask,
     PushBlockTask.name: PushBlockTask,
+    DungeonTask.name: DungeonTask,
 }
 
 
@@ -39,4 +42,4 @@ def make_task(name: str, num_areas: int = 1, seed: int = 0,
 
 
 __all__ = ["TASKS", "make_task", "Task", "TaskStep", "EnvironmentParameters", "BasicTask", "Ball3DTask", "DodgeTask", "CreatureTask",
-           "MimicTask", "RunnerTask", "SoccerTask", "PushBlockTask"]
+           "MimicTask", "RunnerTask", "SoccerTask", "SoccerTwosTask", "PushBlockTask", "DungeonTask"]

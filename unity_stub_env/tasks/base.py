@@ -24,6 +24,20 @@ from protos.types import ActionSpec, ObservationSpec, StatsAggregationMethod
 Stat = tuple[str, float, StatsAggregationMethod]
 
 
+def tiled_areas(xml_path, num_areas: int, spacing: float):
+    """One MjModel with ``num_areas`` copies of a planar area's MJCF (names prefixed ``area<k>/``),
+    the k-th area's origin at (0, spacing * k, 0); 0.02 s steps, no gravity (pushblock, dungeon)."""
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.option.timestep = 0.02
+    spec.option.gravity = [0.0, 0.0, 0.0]
+    for k in range(num_areas):
+        frame = spec.worldbody.add_frame(pos=[0.0, spacing * k, 0.0])
+        spec.attach(mujoco.MjSpec.from_file(str(xml_path)), prefix=f"area{k}/", frame=frame)
+    return spec.compile()
+
+
 @dataclass
 class TaskStep:
     """The outcome of one control step for all n agents.

@@ -45,7 +45,7 @@ import mujoco
 import numpy as np
 
 from protos.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType, StatsAggregationMethod
-from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
+from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep, tiled_areas
 
 XML_PATH = Path(__file__).with_name("pushblock.xml")
 AGENTS = 2
@@ -66,13 +66,7 @@ _FORCE_OF_ACTION = np.array([[0, 0], [0, 1], [0, -1], [1, 0], [-1, 0]], dtype=np
 
 def build_model(num_areas: int) -> mujoco.MjModel:
     """One MjModel with ``num_areas`` copies of pushblock.xml (names prefixed ``area<k>/``)."""
-    spec = mujoco.MjSpec()
-    spec.option.timestep = 0.02
-    spec.option.gravity = [0.0, 0.0, 0.0]
-    for k in range(num_areas):
-        frame = spec.worldbody.add_frame(pos=[0.0, AREA_SPACING * k, 0.0])
-        spec.attach(mujoco.MjSpec.from_file(str(XML_PATH)), prefix=f"area{k}/", frame=frame)
-    return spec.compile()
+    return tiled_areas(XML_PATH, num_areas, AREA_SPACING)
 
 
 class PushBlockTask(Task):
