@@ -22,6 +22,7 @@ pytestmark = pytest.mark.slurm
 
 TEMPLATE = "docker/slurm/train.sbatch"
 MAX_STEPS, SUMMARY, INTERVAL = 6000, 500, 1000
+BASIC_MAX_STEP = 100  # unity_stub_env/tasks/basic.py: an episode ends after at most 100 steps
 CONFIG = f"""
 behaviors:
   Basic:
@@ -85,6 +86,17 @@ def episode_steps(folder: Path) -> float:
     return sum(counts[s] * lengths[s] for s in counts)
 
 
+def assert_episode_steps_add_up(folder: Path, final: int) -> None:
+    """The completed episodes' steps in TensorBoard add up to the trainer's final step, less the two
+    episodes never completed (the one under way at the stop or kill, as the resumed simulator
+    starts afresh, and the one at the end: each at most Basic's max_step = 100 steps), plus, after
+    a kill, the few steps between the checkpoint and the summary after it, counted again after the
+    resume (docs/cluster.md, TensorBoard continuity). A summary period counted twice would be ~500
+    over, one lost 500-700 under. (CI once saw 102 under with the old bound of +-100.)"""
+    counted = episode_steps(folder)
+    assert -SUMMARY / 5 < final - counted <= 2 * BASIC_MAX_STEP, (counted, final)
+
+
 def test_warning_signal_requeues_and_the_job_resumes_to_completion(cluster, tmp_path):
     job, log = submit(cluster, tmp_path)
     wait_for_line(log, r"Basic\. Step: 1000\.")  # after the first summaries
@@ -117,10 +129,7 @@ def test_warning_signal_requeues_and_the_job_resumes_to_completion(cluster, tmp_
     assert per_file[1] == [s for s in labels if s > partial]
     # (a summary with no completed episode and no update has nothing to write: the stop may land
     # a few steps into a period; then its label is absent, and no other)
-    # the episodes' steps add up to the trainer's: a period counted twice or lost would be 500 off
-    counted = episode_steps(run / "Basic")
-    final = status["Basic"]["final_checkpoint"]["steps"]
-    assert abs(counted - final) < SUMMARY / 5, (counted, final)
+    assert_episode_steps_add_up(run / "Basic", status["Basic"]["final_checkpoint"]["steps"])
 
 
 # buffer_size 256: the 18th update comes at ~4,610 steps, after the checkpoint of 4000 and the
@@ -182,7 +191,7 @@ def test_a_job_killed_without_warning_resumes_from_its_last_periodic_checkpoint(
         assert tensorboard_steps(run, tag) == labels, tag
     # the killed start's summaries after that period are not counted: the steps add up
     final = json.loads((run.parent / "run_logs" / "training_status.json").read_text())["Basic"]["final_checkpoint"]["steps"]
-    assert abs(episode_steps(run) - final) < SUMMARY / 5
+    assert_episode_steps_add_up(run, final)
 
 
 def test_a_sweep_runs_one_array_element_per_seed_and_summarises_them(cluster, tmp_path):
