@@ -1,7 +1,7 @@
 """Training benchmark (run by hand, not a test): our trainer vs the real ``mlagents-learn`` 1.1.0.
 
     .venv/bin/python bench/train.py [--task basic|ball3d|dodge] [--config YAML] [--max-steps N]
-                                    [--num-areas N] [--seed S] [--out bench/out]
+                                    [--num-areas N] [--seed S | --seeds S ...] [--pairs P] [--out bench/out]
 
 One run trains the same stub task with the same YAML twice, one process after the other:
   (1) ours:      ``.venv/bin/mlagents-like-learn CONFIG --env stub:TASK``
@@ -232,6 +232,36 @@ def compare(ours: dict, reference: dict) -> dict:
             "target_met": bool(speedup and speedup >= TARGET_SPEEDUP and reward_ok)}
 
 
+def rewards_over_seeds(pairs: list[dict]) -> dict:
+    """``--seeds``: the two trainers' mean reward at each summary step both wrote, averaged over the
+    seeds, and per seed the mean over those steps (the area under its curve, so a seed that learns
+    sooner scores higher). The per-seed differences (ours - reference) give a paired mean and its
+    standard error: one seed's luck is visible as such, not as a verdict."""
+    curves = []
+    for pair in pairs:
+        ours = {r["step"]: r["value"] for r in pair["ours"]["rewards"]}
+        ref = {r["step"]: r["value"] for r in pair["reference"]["rewards"]}
+        curves.append((pair["seed"], ours, ref, sorted(set(ours) & set(ref))))
+    steps = sorted(set.intersection(*(set(c[3]) for c in curves)))
+    per_step = [(step, statistics.fmean(c[1][step] for c in curves), statistics.fmean(c[2][step] for c in curves))
+                for step in steps]
+    per_seed = [(seed, statistics.fmean(ours[s] for s in steps), statistics.fmean(ref[s] for s in steps))
+                for seed, ours, ref, _ in curves]
+    diffs = [o - r for _, o, r in per_seed]
+    mean_diff = statistics.fmean(diffs)
+    sem = statistics.stdev(diffs) / len(diffs) ** 0.5 if len(diffs) > 1 else None
+    lines = ["", f"### rewards over {len(curves)} seeds (mean reward per summary step, averaged over the seeds)", "",
+             "| step | ours | reference |", "|---|---:|---:|"]
+    lines += [f"| {step} | {o:.3f} | {r:.3f} |" for step, o, r in per_step]
+    lines += ["", "| seed | ours: mean over the steps | reference | ours - reference |", "|---|---:|---:|---:|"]
+    lines += [f"| {seed} | {o:.3f} | {r:.3f} | {o - r:+.3f} |" for seed, o, r in per_seed]
+    lines += ["", f"mean over seeds: ours {statistics.fmean(o for _, o, _ in per_seed):.3f}, reference "
+                  f"{statistics.fmean(r for _, _, r in per_seed):.3f}; paired difference {mean_diff:+.3f} "
+                  f"(standard error {fmt(sem, '.3f')}; ours ahead on {sum(d > 0 for d in diffs)} of {len(diffs)} seeds)"]
+    return {"steps": steps, "per_step": per_step, "per_seed": per_seed, "mean_difference": mean_diff,
+            "standard_error": sem, "markdown": "\n".join(lines)}
+
+
 def fmt(value, spec: str = ".1f") -> str:
     return "-" if value is None else format(value, spec)
 
@@ -274,6 +304,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--max-steps", type=int, default=None)
     parser.add_argument("--num-areas", type=int, default=None)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--seeds", type=int, nargs="+", default=None,
+                        help="one pair per seed (alternating which trainer goes first) and the rewards "
+                             "compared over the seeds: per summary step and per seed (replaces --seed/--pairs)")
     parser.add_argument("--out", type=Path, default=REPO / "bench" / "out")
     parser.add_argument("--timeout", type=float, default=3600.0, help="per trainer, seconds")
     parser.add_argument("--reference-tree", type=Path, default=None,
@@ -286,6 +319,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.seeds and args.pairs > 1:
+        print("--seeds runs one pair per seed; drop --pairs")
+        return 2
+    seeds = args.seeds or [args.seed] * max(1, args.pairs)
     source = args.config or REPO / "configs" / f"{args.task}.yaml"
     for needed in (OUR_LEARN,) if args.reference_tree else (OUR_LEARN, REFERENCE_LEARN):
         if not needed.exists():
@@ -319,8 +356,9 @@ def main(argv: list[str] | None = None) -> int:
         config = write_bench_config(source, config_path, args.max_steps)
         behavior = next(iter(config["behaviors"]))
         exe = stub_launcher(folder, args.task)
-        for index in range(max(1, args.pairs)):
-            pair_folder = folder / f"pair{index}" if args.pairs > 1 else folder
+        for index, seed in enumerate(seeds):
+            args.seed = seed
+            pair_folder = folder / f"pair{index}" if len(seeds) > 1 else folder
             runs = {
                 "ours": lambda f=pair_folder: train("ours", OUR_LEARN, f"stub:{args.task}", config_path,
                                                     f / "ours", args, behavior, ours_env),
@@ -334,7 +372,7 @@ def main(argv: list[str] | None = None) -> int:
             done = {name: runs[name]() for name in order}
             verdict = compare(done["ours"], done["reference"])
             print(markdown(args.task, done["ours"], done["reference"], verdict))
-            pairs.append({"order": order, "ours": done["ours"], "reference": done["reference"],
+            pairs.append({"seed": seed, "order": order, "ours": done["ours"], "reference": done["reference"],
                           "verdict": verdict})
     ours, reference, verdict = pairs[-1]["ours"], pairs[-1]["reference"], pairs[-1]["verdict"]
     if len(pairs) > 1:
@@ -343,10 +381,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n{len(pairs)} pairs, speed ratios (agent-steps/s): "
               + ", ".join(f"{r:.2f}x" for r in ratios) + f"; median {median:.2f}x "
               f"(target >= {TARGET_SPEEDUP:g}x)")
+    seed_rewards = None
+    if args.seeds and len(pairs) > 1:
+        seed_rewards = rewards_over_seeds(pairs)
+        print(seed_rewards["markdown"])
     args.out.mkdir(parents=True, exist_ok=True)
     report = {"task": args.task, "config": str(source), "bench_config": config,
               "seed": args.seed, "num_areas": args.num_areas, "ours": ours,
-              "reference": reference, "verdict": verdict, "pairs": pairs,
+              "reference": reference, "verdict": verdict, "pairs": pairs, "seed_rewards": seed_rewards,
               "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                           "loadavg_at_end": os.getloadavg()}}
     out_path = args.out / f"train_{args.task}.json"
