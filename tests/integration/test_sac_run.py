@@ -40,7 +40,7 @@ def test_sac_trains_saves_its_replay_buffer_and_resumes_it(tmp_path, env_no_prox
     assert r.returncode == 0, r.stderr[-3000:]
     tags = tb_scalars(tmp_path / "results/s/Basic")
     for tag in ("Losses/Q1 Loss", "Losses/Q2 Loss", "Losses/Value Loss", "Losses/Policy Loss",
-                "Policy/Discrete Entropy Coeff", "Policy/Extrinsic Value", "Policy/Learning Rate"):
+                "Policy/Discrete Entropy Coeff", "Policy/Entropy", "Policy/Extrinsic Value", "Policy/Learning Rate"):
         assert tag in tags, tag
     assert "Policy/Continuous Entropy Coeff" not in tags  # basic has one discrete branch only
     buffer_file = tmp_path / "results/s/Basic/last_replay_buffer.npz"

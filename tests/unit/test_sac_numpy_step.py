@@ -131,3 +131,25 @@ def test_memory_keeps_the_torch_path():
     hp = SACHyperparams(hidden_units=8, memory_size=4, sequence_length=2)
     trainer = SACTrainer("M", BehaviorSpec((vec(3, "a"),), ActionSpec(1, ())), hp, seed=0)
     assert not numpy_step.supports(trainer) and trainer._numpy_step is None
+
+
+@pytest.mark.parametrize("numpy", [True, False], ids=["numpy", "torch"])
+def test_policy_entropy_is_reported_from_each_gradient_step(numpy):
+    """Policy/Entropy (the reference writes it for every trainer): with the heads' weights zeroed,
+    the policy is known by hand. Hybrid (2 continuous, branches 4 and 2): log sigma = -0.5 in
+    both dimensions gives the Gaussian's 0.5 log(2 pi e) - 0.5 = 0.9189; the uniform branches
+    log 4 + log 2 = 2.0794 (masked rows: log 3 + log 2 = 1.7918, every other row)."""
+    trainer = make(ActionSpec(2, (4, 2)), (), numpy)
+    feed([trainer], masked=True)
+    actor = trainer.policy.actor
+    with torch.no_grad():
+        for head in (actor.log_sigma_head, *actor.discrete_branches):
+            head.weight.zero_()
+            head.bias.zero_()
+        actor.log_sigma_head.bias.fill_(-0.5)
+    batch = trainer.buffer.sample(32, torch.Generator().manual_seed(2))
+    masked_rows = batch["action_masks"][:, 1].mean()
+    gaussian = 0.5 * np.log(2 * np.pi * np.e) - 0.5
+    expected = gaussian + masked_rows * np.log(3 * 2) + (1 - masked_rows) * np.log(4 * 2)
+    assert 0 < masked_rows < 1
+    assert trainer.gradient_step(batch)["Policy/Entropy"] == pytest.approx(expected, rel=1e-5)

@@ -92,17 +92,19 @@ class SACPolicy(Policy):
 
     def sample_with_grad(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None, generator: torch.Generator,
                          memories: torch.Tensor | None = None, sequence_length: int = 1
-                         ) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]:
+                         ) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None, torch.Tensor | None,
+                                    np.ndarray]:
         """For the update, with gradients: (squashed actions [n, c] (reparameterised), their
         log-probs [n, c], the discrete probabilities [n, K] and log(p + eps) [n, K] of every
-        option; None for an absent action kind). A recurrent actor reads the n rows as sequences
+        option; None for an absent action kind), and without: the policy's entropy per row, float32
+        [n] (``_entropy``, for ``Policy/Entropy``). A recurrent actor reads the n rows as sequences
         of ``sequence_length`` starting from ``memories`` [1, n / sequence_length, m]."""
         if memories is not None:
             encoding, _ = self.actor.network_body.forward_memory(obs, memories, sequence_length)
         else:
             encoding = self.actor.network_body(obs)
         mu, logits = self.actor.heads_of(encoding, allowed)
-        actions = log_probs = probs = all_log_probs = None
+        actions = log_probs = probs = all_log_probs = log_sigma = None
         if mu is not None:
             log_sigma = self.actor.log_sigma_of(encoding, mu)
             noise = torch.randn(mu.shape, generator=generator, device=mu.device)
@@ -112,4 +114,6 @@ class SACPolicy(Policy):
         if logits:
             probs = torch.cat([torch.softmax(branch, dim=1) for branch in logits], dim=1)
             all_log_probs = torch.log(probs + EPSILON)
-        return actions, log_probs, probs, all_log_probs
+        entropy = _entropy(len(encoding), None if log_sigma is None else log_sigma.detach().cpu().numpy(),
+                           [torch.softmax(branch, dim=1).detach().cpu().numpy() for branch in logits])
+        return actions, log_probs, probs, all_log_probs, entropy

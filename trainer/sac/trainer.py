@@ -326,7 +326,7 @@ class SACTrainer:
             def run(network, inputs, actions=None, start=None):
                 return network(inputs, actions)
 
-        actions, cont_log_probs, probs, all_log_probs = self.policy.sample_with_grad(
+        actions, cont_log_probs, probs, all_log_probs, entropy = self.policy.sample_with_grad(
             obs, allowed, self.noise_generator, memories, step)
         stored = t["continuous_actions"] if spec.continuous_size else None
         q1, q2 = self.q_network.q1_network, self.q_network.q2_network
@@ -355,6 +355,7 @@ class SACTrainer:
             q1_policy, q2_policy, next_values, q1_taken, q2_taken, values, rewards = map(
                 real, (q1_policy, q2_policy, next_values, q1_taken, q2_taken, values, rewards))
             cont_log_probs, probs, all_log_probs = map(real, (cont_log_probs, probs, all_log_probs))
+            entropy = entropy[keep.cpu().numpy()]
             t = {key: t[key][keep] for key in ("done", "discrete_actions")}
         alpha_c = self.log_ent_coef.continuous.exp().detach() if spec.continuous_size else None
         alpha_d = self.log_ent_coef.discrete.exp().detach() if self.branches else None
@@ -399,6 +400,7 @@ class SACTrainer:
             "Losses/Value Loss": value_loss.item(),
             "Losses/Q1 Loss": q1_loss.item(),
             "Losses/Q2 Loss": q2_loss.item(),
+            "Policy/Entropy": float(np.mean(entropy)),
         }
         if spec.continuous_size:
             stats["Policy/Continuous Entropy Coeff"] = float(self.log_ent_coef.continuous.detach().exp().mean())
