@@ -24,26 +24,36 @@ def vec(n: int, name: str = "v") -> ObservationSpec:
     return ObservationSpec((n,), (DimensionProperty.NONE,), ObservationType.DEFAULT, name)
 
 
+def feed(trainers: list, masked: bool, lengths: tuple[int, ...], done, episodes: bool = False) -> None:
+    """The same random trajectories (acted by the first trainer) into every trainer (PPO's or
+    SAC's): observations N(1, 2^2), rewards N(0, 1), with ``masked`` option 1 of branch 0
+    forbidden on every other step; trajectory k of ``length`` steps ends its episode if
+    ``done(k, length)``, and with ``episodes`` it is episode k."""
+    rng = np.random.default_rng(11)
+    spec = trainers[0].behavior_spec
+    branches = spec.action_spec.discrete_branches
+    for k, length in enumerate(lengths):
+        obs = [(rng.standard_normal((length, o.shape[0])) * 2 + 1).astype(np.float32) for o in spec.observation_specs]
+        mask = None
+        if branches:
+            mask = np.zeros((length, sum(branches)), dtype=bool)
+            if masked:
+                mask[::2, 1] = True
+        out = trainers[0].policy.act(obs, mask)
+        rewards = rng.standard_normal(length).astype(np.float32)
+        for trainer in trainers:
+            trainer.process_trajectory(Trajectory(obs, [o[-1] + 0.5 for o in obs], rewards, out.continuous_raw,
+                                                  out.discrete, out.log_probs, mask, done(k, length), False,
+                                                  episode=k if episodes else None))
+
+
 def trained_pair(spec: BehaviorSpec, num_epoch: int, masked: bool):
     hp = PPOHyperparams(batch_size=32, buffer_size=200, num_epoch=num_epoch, normalize=True,
                         hidden_units=24, num_layers=2, beta=5e-3, learning_rate=3e-3,
                         reward_signals={"extrinsic": (0.99, 0.5)})
     trainers = [PPOTrainer("B", spec, hp, seed=5), PPOTrainer("B", spec, hp, seed=5)]
     trainers[0].numpy_update, trainers[1].numpy_update = True, False
-    rng = np.random.default_rng(11)
-    branches = spec.action_spec.discrete_branches
-    for length in (70, 90, 60):  # 220 experiences > buffer_size
-        obs = [(rng.standard_normal((length, o.shape[0])) * 2 + 1).astype(np.float32) for o in spec.observation_specs]
-        mask = None
-        if branches:
-            mask = np.zeros((length, sum(branches)), dtype=bool)
-            if masked:
-                mask[::2, 1] = True  # option 1 of branch 0 forbidden on every other step
-        out = trainers[0].policy.act(obs, mask)
-        rewards = rng.standard_normal(length).astype(np.float32)
-        for trainer in trainers:
-            trainer.process_trajectory(Trajectory(obs, [o[-1] + 0.5 for o in obs], rewards, out.continuous_raw,
-                                                  out.discrete, out.log_probs, mask, length == 90, False))
+    feed(trainers, masked, (70, 90, 60), done=lambda k, length: length == 90)  # 220 experiences > buffer_size
     assert numpy_update.supports(trainers[0])
     stats = [trainer.update() for trainer in trainers]
     return trainers, stats

@@ -9,13 +9,12 @@ import pytest
 import torch
 
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
-from trainer.ppo.buffer import Trajectory
 from trainer.ppo.hyperparams import SignalNetwork
 from trainer.sac import numpy_step
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.trainer import SACTrainer, copy_normalization
 
-from tests.unit.test_ppo_numpy_update import assert_numpy_actor_sees
+from tests.unit.test_ppo_numpy_update import assert_numpy_actor_sees, feed as feed_trajectories
 
 CASES = [
     (ActionSpec(2, ()), False, ()),
@@ -44,23 +43,8 @@ def make(action_spec: ActionSpec, signals: tuple[str, ...], numpy: bool) -> SACT
 
 
 def feed(trainers: list[SACTrainer], masked: bool, lengths=(40, 50, 30)) -> None:
-    """The same trajectories (acted by the first trainer) into every trainer."""
-    rng = np.random.default_rng(11)
-    spec = trainers[0].behavior_spec
-    branches = spec.action_spec.discrete_branches
-    for k, length in enumerate(lengths):
-        obs = [(rng.standard_normal((length, o.shape[0])) * 2 + 1).astype(np.float32) for o in spec.observation_specs]
-        mask = None
-        if branches:
-            mask = np.zeros((length, sum(branches)), dtype=bool)
-            if masked:
-                mask[::2, 1] = True  # option 1 of branch 0 forbidden on every other step
-        out = trainers[0].policy.act(obs, mask)
-        rewards = rng.standard_normal(length).astype(np.float32)
-        for trainer in trainers:
-            trainer.process_trajectory(Trajectory(obs, [o[-1] + 0.5 for o in obs], rewards, out.continuous_raw,
-                                                  out.discrete, out.log_probs, mask, k % 2 == 0, False,
-                                                  episode=k))
+    """The same trajectories (acted by the first trainer) into every trainer; every other one ends its episode."""
+    feed_trajectories(trainers, masked, lengths, done=lambda k, _: k % 2 == 0, episodes=True)
 
 
 @pytest.mark.parametrize("action_spec,masked,signals", CASES, ids=IDS)
