@@ -40,7 +40,7 @@ from trainer.ppo import numpy_net
 from trainer.ppo.distributions import EPSILON
 from trainer.ppo.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN
 from trainer.sac import losses
-from trainer.sac.policy import _numpy_squashed_log_prob
+from trainer.sac.policy import _entropy, _numpy_squashed_log_prob
 
 
 def supports(trainer) -> bool:
@@ -220,7 +220,7 @@ class NumpySAC:
             "Losses/Value Loss": sum(value_losses) / N,
             "Losses/Q1 Loss": sum(q_losses[0]) / N,
             "Losses/Q2 Loss": sum(q_losses[1]) / N,
-            "Policy/Entropy": self._mean_entropy(log_sigma if c else None, neg_entropy if branches else None),
+            "Policy/Entropy": float(_entropy(n, log_sigma if c else None, [probs] if branches else []).mean()),
         }
 
         # ---- the policy loss through Q1's continuous-action input (Q1's weights held constant)
@@ -274,17 +274,6 @@ class NumpySAC:
         if branches:
             grads[self.alpha_ids[1]] = np.add.reduce(neg_entropy + self.target_d, axis=0) / (-n * len(branches))
         return grads, stats
-
-    @staticmethod
-    def _mean_entropy(log_sigma: np.ndarray | None, neg_entropy: np.ndarray | None) -> float:
-        """The minibatch's mean policy entropy, as policy._entropy: the Gaussian's mean over its
-        dimensions before the tanh plus each discrete branch's entropy."""
-        entropy = 0.0
-        if log_sigma is not None:
-            entropy += float(np.mean(0.5 * np.log(2 * np.pi * np.e) + log_sigma, axis=1).mean())
-        if neg_entropy is not None:
-            entropy -= float(np.add.reduce(neg_entropy, axis=1).mean())
-        return entropy
 
     def _heads_backward(self, network: numpy_net.NumpyCritic, h: np.ndarray, g_out: dict[str, np.ndarray],
                         grads: dict[int, np.ndarray], param_rows: int | None = None) -> np.ndarray:

@@ -115,5 +115,5 @@ class SACPolicy(Policy):
             probs = torch.cat([torch.softmax(branch, dim=1) for branch in logits], dim=1)
             all_log_probs = torch.log(probs + EPSILON)
         entropy = _entropy(len(encoding), None if log_sigma is None else log_sigma.detach().cpu().numpy(),
-                           [torch.softmax(branch, dim=1).detach().cpu().numpy() for branch in logits])
+                           [] if probs is None else [probs.detach().cpu().numpy()])  # all branches: their sum
         return actions, log_probs, probs, all_log_probs, entropy
