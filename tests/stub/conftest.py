@@ -138,3 +138,30 @@ def run_interop_script(script: str, timeout: float = 120) -> dict:
     lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
     assert lines, done.stdout + done.stderr
     return json.loads(lines[-1][len("RESULT "):])
+
+
+_SESSION_HEAD = r"""
+import json, subprocess, sys
+import numpy as np
+from mlagents_envs.environment import UnityEnvironment
+from mlagents_envs.base_env import ActionTuple
+
+port, stub_python, repo = int(sys.argv[1]), sys.argv[2], sys.argv[3]
+stub = subprocess.Popen([stub_python, "-m", "unity_stub_env.cli", STUB_ARGS, "--mlagents-port", str(port)], cwd=repo)
+env = UnityEnvironment(file_name=None, base_port=port, timeout_wait=30)
+env.reset()
+"""
+_SESSION_TAIL = r"""
+env.close()
+out["exit"] = stub.wait(timeout=20)
+print("RESULT " + json.dumps(out))
+"""
+
+
+def run_stub_session(stub_args: list[str], body: str, timeout: float = 120) -> dict:
+    """``run_interop_script`` of one session of the real ``UnityEnvironment`` with the stub: the
+    script starts ``unity_stub_env.cli STUB_ARGS`` on the free port, connects and resets, runs
+    ``body`` (Python at top level with ``env``, ``np`` and ``ActionTuple``; it fills the dict
+    ``out``), then closes the environment and adds the stub's exit status as ``out["exit"]``."""
+    head = _SESSION_HEAD.replace("STUB_ARGS", ", ".join(f'"{arg}"' for arg in stub_args))
+    return run_interop_script(head + body + _SESSION_TAIL, timeout)

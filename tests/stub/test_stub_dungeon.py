@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from protos.communicator_objects import agent_action_pb2
-from tests.stub.conftest import INTEROP_PYTHON, run_interop_script
+from tests.stub.conftest import INTEROP_PYTHON, run_stub_session
 from unity_stub_env.academy import Academy
 from unity_stub_env.cli import main
 from unity_stub_env.tasks import make_task
@@ -178,17 +178,8 @@ def _action(choice: int) -> agent_action_pb2.AgentActionProto:
     return agent_action_pb2.AgentActionProto(discrete_actions=[choice])
 
 
+# what runs in the real UnityEnvironment session of run_stub_session (conftest): env is reset; fill out
 _SCRIPT = r"""
-import json, subprocess, sys
-import numpy as np
-from mlagents_envs.environment import UnityEnvironment
-from mlagents_envs.base_env import ActionTuple
-
-port, stub_python, repo = int(sys.argv[1]), sys.argv[2], sys.argv[3]
-stub = subprocess.Popen([stub_python, "-m", "unity_stub_env.cli", "--task", "dungeon", "--num-areas", "1",
-                         "--mlagents-port", str(port)], cwd=repo)
-env = UnityEnvironment(file_name=None, base_port=port, timeout_wait=30)
-env.reset()
 name = "Dungeon?team=0"
 spec = env.behavior_specs[name]
 out = {"behaviors": list(env.behavior_specs), "branches": list(spec.action_spec.discrete_branches),
@@ -223,16 +214,13 @@ for _ in range(100):  # the scripted sacrifice, from the observations (agent ids
                                  "deciding": sorted(int(a) for a in decision.agent_id)})
         if len(out["terminals"]) == 2:
             break
-env.close()
-out["exit"] = stub.wait(timeout=20)
-print("RESULT " + json.dumps(out))
 """
 
 
 @pytest.mark.interop
 @pytest.mark.skipif(not os.path.exists(INTEROP_PYTHON), reason="needs .venv-interop with mlagents 1.1.0")
 def test_real_mlagents_envs_sees_the_eaten_agent_leave_and_the_group_escape():
-    out = run_interop_script(_SCRIPT)
+    out = run_stub_session(["--task", "dungeon", "--num-areas", "1"], _SCRIPT)
     assert out["behaviors"] == ["Dungeon?team=0"] and out["branches"] == [5] and out["obs"] == [[OBS_SIZE]]
     assert out["group_ids"] == [1, 1, 1]
     eaten, escape = out["terminals"]

@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from tests.stub.conftest import INTEROP_PYTHON, run_interop_script
+from tests.stub.conftest import INTEROP_PYTHON, run_stub_session
 from unity_stub_env.tasks import make_task
 from unity_stub_env.tasks.base import EnvironmentParameters
 from unity_stub_env.tasks.pushblock import GOAL_Y, LEAVE_REWARD, MAX_STEP, TIME_PENALTY
@@ -70,17 +70,8 @@ def test_an_agent_that_leaves_the_floor_ends_alone_and_comes_back_to_its_group()
     np.testing.assert_allclose(task.observe()[0][0, :2], start)  # back at its start spot, same group
 
 
+# what runs in the real UnityEnvironment session of run_stub_session (conftest): env is reset; fill out
 _SCRIPT = r"""
-import json, subprocess, sys
-import numpy as np
-from mlagents_envs.environment import UnityEnvironment
-from mlagents_envs.base_env import ActionTuple
-
-port, stub_python, repo = int(sys.argv[1]), sys.argv[2], sys.argv[3]
-stub = subprocess.Popen([stub_python, "-m", "unity_stub_env.cli", "--task", "pushblock", "--num-areas", "2",
-                         "--mlagents-port", str(port)], cwd=repo)
-env = UnityEnvironment(file_name=None, base_port=port, timeout_wait=30)
-env.reset()
 out = {"behaviors": list(env.behavior_specs)}
 name = "PushBlock?team=0"
 spec = env.behavior_specs[name]
@@ -101,16 +92,13 @@ for _ in range(30):  # both agents of both areas push towards the goal
         break
 out["group_rewards"] = group_rewards
 out["terminal_groups"] = terminal_groups
-env.close()
-out["exit"] = stub.wait(timeout=20)
-print("RESULT " + json.dumps(out))
 """
 
 
 @pytest.mark.interop
 @pytest.mark.skipif(not os.path.exists(INTEROP_PYTHON), reason="needs .venv-interop with mlagents 1.1.0")
 def test_real_mlagents_envs_sees_the_groups_and_their_rewards():
-    out = run_interop_script(_SCRIPT)
+    out = run_stub_session(["--task", "pushblock", "--num-areas", "2"], _SCRIPT)
     assert out["behaviors"] == ["PushBlock?team=0"] and out["branches"] == [5]
     assert out["group_ids"] == [1, 1, 2, 2]
     # every step's group reward: the hurry penalty plus the block's progress / GOAL_Y (the same for

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from protos.communicator_objects import agent_action_pb2
-from tests.stub.conftest import INTEROP_PYTHON, run_interop_script
+from tests.stub.conftest import INTEROP_PYTHON, run_stub_session
 from unity_stub_env.academy import Academy, ActionCountError
 from unity_stub_env.agents import EpisodeIdCounter
 from unity_stub_env.tasks import make_task
@@ -123,17 +123,8 @@ def test_terminal_infos_go_to_each_team():
         assert done[0].reward == pytest.approx(sign - TIME_PENALTY, abs=1e-6)
 
 
+# what runs in the real UnityEnvironment session of run_stub_session (conftest): env is reset; fill out
 _SCRIPT = r"""
-import json, subprocess, sys
-import numpy as np
-from mlagents_envs.environment import UnityEnvironment
-from mlagents_envs.base_env import ActionTuple
-
-port, stub_python, repo = int(sys.argv[1]), sys.argv[2], sys.argv[3]
-stub = subprocess.Popen([stub_python, "-m", "unity_stub_env.cli", "--task", "soccer", "--num-areas", "2",
-                         "--seed", "0", "--mlagents-port", str(port)], cwd=repo)
-env = UnityEnvironment(file_name=None, base_port=port, timeout_wait=30)
-env.reset()
 out = {"behaviors": sorted(env.behavior_specs)}
 specs = [env.behavior_specs[f"Soccer?team={t}"] for t in (0, 1)]
 out["same_specs"] = specs[0] == specs[1]
@@ -157,9 +148,6 @@ for _ in range(300):
         out["goal"] = [[(float(r), bool(i)) for r, i in zip(e.reward, e.interrupted) if not i] for e in ends]
         break
 out["results"] = results
-env.close()
-out["exit"] = stub.wait(timeout=20)
-print("RESULT " + json.dumps(out))
 """
 
 
@@ -168,7 +156,7 @@ print("RESULT " + json.dumps(out))
 def test_real_mlagents_envs_drives_both_teams():
     """A scripted team 0 (runs at the ball) against a team 1 standing still, through the real
     UnityEnvironment: two behaviors with team ids, identical specs, +1 / -1 at the first goal."""
-    out = run_interop_script(_SCRIPT, timeout=180)
+    out = run_stub_session(["--task", "soccer", "--num-areas", "2", "--seed", "0"], _SCRIPT, timeout=180)
     assert out["behaviors"] == ["Soccer?team=0", "Soccer?team=1"]
     assert out["same_specs"] and out["obs"] == [[12]] and out["branches"] == [3, 3]
     assert len(out["ids"][0]) == 2 and len(out["ids"][1]) == 2 and not set(out["ids"][0]) & set(out["ids"][1])
@@ -329,17 +317,8 @@ def test_twos_the_academy_sends_group_ids_and_group_rewards_per_team():
         assert len(batches[key]) == 6  # 2 terminal infos, then all 4 players deciding
 
 
+# likewise for soccer_twos
 _TWOS_SCRIPT = r"""
-import json, subprocess, sys
-import numpy as np
-from mlagents_envs.environment import UnityEnvironment
-from mlagents_envs.base_env import ActionTuple
-
-port, stub_python, repo = int(sys.argv[1]), sys.argv[2], sys.argv[3]
-stub = subprocess.Popen([stub_python, "-m", "unity_stub_env.cli", "--task", "soccer_twos", "--num-areas", "2",
-                         "--seed", "0", "--mlagents-port", str(port)], cwd=repo)
-env = UnityEnvironment(file_name=None, base_port=port, timeout_wait=30)
-env.reset()
 keys = [f"SoccerTwos?team={t}" for t in (0, 1)]
 out = {"behaviors": sorted(env.behavior_specs),
        "groups": [[int(g) for g in env.get_steps(k)[0].group_id] for k in keys]}
@@ -357,9 +336,6 @@ for _ in range(400):
                         "group_reward": [float(r) for r in e.group_reward],
                         "interrupted": [bool(i) for i in e.interrupted]} for e in ends]
         break
-env.close()
-out["exit"] = stub.wait(timeout=20)
-print("RESULT " + json.dumps(out))
 """
 
 
@@ -369,7 +345,7 @@ def test_real_mlagents_envs_sees_the_twos_groups_and_their_goal_rewards():
     """soccer_twos through the real UnityEnvironment: group ids 2 area + team + 1 per team, and at
     the first goal (team 0 chases the ball, team 1 stands) both players of the pitch's two groups
     end, individual reward 0, group reward +1 - (k - 1) / 250 for the scorers and -1 for the others."""
-    out = run_interop_script(_TWOS_SCRIPT, timeout=180)
+    out = run_stub_session(["--task", "soccer_twos", "--num-areas", "2", "--seed", "0"], _TWOS_SCRIPT, timeout=180)
     assert out["behaviors"] == ["SoccerTwos?team=0", "SoccerTwos?team=1"]
     assert out["groups"] == [[1, 1, 3, 3], [2, 2, 4, 4]]
     team0, team1 = out["goal"]
