@@ -40,6 +40,22 @@ def learn(args: list[str], cwd: Path, timeout: float = 240, **kw) -> subprocess.
     return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout, **kw)
 
 
+def train_on_stub(tmp_path: Path, config: Path, task: str, behavior: str, env: dict, *, num_areas: int,
+                  seed: int = 1, run_id: str = "r", timeout: float = 600):
+    """Train ``config`` on ``stub:TASK`` with mlagents-like-learn in its own process (real gRPC),
+    results under ``tmp_path/results/RUN_ID``; asserts it exited 0 and returns the behavior's
+    TensorBoard events, read back (an EventAccumulator)."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    r = learn([str(config), "--env", f"stub:{task}", "--num-areas", str(num_areas), "--seed", str(seed),
+               "--run-id", run_id, "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
+              cwd=tmp_path, timeout=timeout, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    acc = EventAccumulator(str(tmp_path / "results" / run_id / behavior), size_guidance={"scalars": 0})
+    acc.Reload()
+    return acc
+
+
 BASIC_YAML = """
 behaviors:
   Basic:

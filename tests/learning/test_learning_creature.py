@@ -13,9 +13,8 @@ from __future__ import annotations
 import textwrap
 
 import pytest
-from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from tests.integration.conftest import free_port_block, learn
+from tests.integration.conftest import train_on_stub
 
 pytestmark = pytest.mark.slow
 
@@ -37,12 +36,8 @@ behaviors:
 def test_creature_return_rises_within_40k_steps(tmp_path, env_no_proxy):
     cfg = tmp_path / "creature.yaml"
     cfg.write_text(textwrap.dedent(SMALL_CREATURE))
-    r = learn([str(cfg), "--env", "stub:creature", "--num-areas", "4", "--seed", "1", "--run-id", "c",
-               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
-              cwd=tmp_path, timeout=900, env=env_no_proxy)
-    assert r.returncode == 0, r.stderr[-3000:]
-    acc = EventAccumulator(str(tmp_path / "results" / "c" / "Creature"), size_guidance={"scalars": 0})
-    acc.Reload()
+    acc = train_on_stub(tmp_path, cfg, "creature", "Creature", env_no_proxy, num_areas=4, seed=1, run_id="c",
+                        timeout=900)
     reward = [(e.step, e.value) for e in acc.Scalars("Environment/Cumulative Reward")]
     assert reward[-1][0] == 40000 and len(reward) == 10
     last = sum(value for _, value in reward[-3:]) / 3

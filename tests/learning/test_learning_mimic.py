@@ -18,9 +18,8 @@ from __future__ import annotations
 import textwrap
 
 import pytest
-from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from tests.integration.conftest import free_port_block, learn
+from tests.integration.conftest import train_on_stub
 
 pytestmark = pytest.mark.slow
 
@@ -44,12 +43,8 @@ environment_parameters:
 def test_mimic_stays_up_longer_after_64k_steps(tmp_path, env_no_proxy):
     cfg = tmp_path / "mimic.yaml"
     cfg.write_text(textwrap.dedent(SMALL_MIMIC))
-    r = learn([str(cfg), "--env", "stub:mimic", "--seed", "1", "--run-id", "m", "--num-areas", "2",
-               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
-              cwd=tmp_path, timeout=900, env=env_no_proxy)
-    assert r.returncode == 0, r.stderr[-3000:]
-    acc = EventAccumulator(str(tmp_path / "results" / "m" / "Mimic"), size_guidance={"scalars": 0})
-    acc.Reload()
+    acc = train_on_stub(tmp_path, cfg, "mimic", "Mimic", env_no_proxy, num_areas=2, seed=1, run_id="m",
+                        timeout=900)
     reward = [(e.step, e.value) for e in acc.Scalars("Environment/Cumulative Reward")]
     length = [e.value for e in acc.Scalars("Environment/Episode Length")]
     assert reward[-1][0] == 64000 and len(reward) == 8

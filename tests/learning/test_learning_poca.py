@@ -1,12 +1,9 @@
 """MA-POCA learns the cooperative stub task: fixed seed, real gRPC, bounded steps."""
 from __future__ import annotations
 
-import shutil
-
 import pytest
-from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from tests.integration.conftest import ROOT, free_port_block, learn
+from tests.integration.conftest import ROOT, train_on_stub
 
 pytestmark = pytest.mark.slow
 
@@ -21,12 +18,8 @@ def test_poca_pushes_the_block_home_within_40k_steps(tmp_path, env_no_proxy):
     text = (ROOT / "configs" / "pushblock_poca.yaml").read_text().replace("max_steps: 60000", "max_steps: 40000")
     cfg.write_text(text)
     assert "max_steps: 40000" in text
-    r = learn([str(cfg), "--env", "stub:pushblock", "--num-areas", "8", "--seed", "1", "--run-id", "p",
-               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
-              cwd=tmp_path, timeout=600, env=env_no_proxy)
-    assert r.returncode == 0, r.stderr[-3000:]
-    acc = EventAccumulator(str(tmp_path / "results" / "p" / "PushBlock"), size_guidance={"scalars": 0})
-    acc.Reload()
+    acc = train_on_stub(tmp_path, cfg, "pushblock", "PushBlock", env_no_proxy, num_areas=8, seed=1, run_id="p",
+                        timeout=600)
     curve = [(e.step, e.value) for e in acc.Scalars("Environment/Group Cumulative Reward")]
     success = [e.value for e in acc.Scalars("PushBlock/Success")]
     print(curve, success)
@@ -49,12 +42,8 @@ def test_poca_learns_the_sacrifice_within_28k_steps(tmp_path, env_no_proxy):
     text = (ROOT / "configs" / "dungeon_poca.yaml").read_text().replace("max_steps: 60000", "max_steps: 28000")
     cfg.write_text(text)
     assert "max_steps: 28000" in text
-    r = learn([str(cfg), "--env", "stub:dungeon", "--num-areas", "8", "--seed", "1", "--run-id", "d",
-               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
-              cwd=tmp_path, timeout=600, env=env_no_proxy)
-    assert r.returncode == 0, r.stderr[-3000:]
-    acc = EventAccumulator(str(tmp_path / "results" / "d" / "Dungeon"), size_guidance={"scalars": 0})
-    acc.Reload()
+    acc = train_on_stub(tmp_path, cfg, "dungeon", "Dungeon", env_no_proxy, num_areas=8, seed=1, run_id="d",
+                        timeout=600)
     success = [(e.step, e.value) for e in acc.Scalars("Dungeon/Success")]
     returns = [e.value for e in acc.Scalars("Policy/Extrinsic Reward")]
     print(success, returns)

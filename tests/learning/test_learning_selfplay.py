@@ -18,9 +18,8 @@ times as many goals as it concedes against the random player, with >= 100 goals.
 from __future__ import annotations
 
 import pytest
-from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from tests.integration.conftest import ROOT, free_port_block, learn
+from tests.integration.conftest import ROOT, train_on_stub
 
 pytestmark = pytest.mark.slow
 
@@ -56,12 +55,8 @@ def test_soccer_selfplay_elo_rises_and_the_policy_beats_a_random_player(tmp_path
     text = (ROOT / "configs" / "soccer.yaml").read_text()
     cfg.write_text(text.replace("max_steps: 200000", f"max_steps: {STEPS}"))
     assert f"max_steps: {STEPS}" in cfg.read_text()
-    r = learn([str(cfg), "--env", "stub:soccer", "--num-areas", "16", "--seed", "1", "--run-id", "s",
-               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
-              cwd=tmp_path, timeout=600, env=env_no_proxy)
-    assert r.returncode == 0, r.stderr[-3000:]
-    acc = EventAccumulator(str(tmp_path / "results" / "s" / "Soccer"), size_guidance={"scalars": 0})
-    acc.Reload()
+    acc = train_on_stub(tmp_path, cfg, "soccer", "Soccer", env_no_proxy, num_areas=16, seed=1, run_id="s",
+                        timeout=600)
     elo = [(e.step, e.value) for e in acc.Scalars("Self-play/ELO")]
     assert elo[-1][0] == STEPS
     assert abs(elo[0][1] - 1200) < 5, elo  # it starts at initial_elo...
@@ -107,12 +102,8 @@ def test_soccer_twos_poca_selfplay_elo_rises_and_the_team_beats_a_random_team(tm
     text = (ROOT / "configs" / "soccer_twos.yaml").read_text()
     cfg.write_text(text.replace("max_steps: 300000", f"max_steps: {TWOS_STEPS}"))
     assert f"max_steps: {TWOS_STEPS}" in cfg.read_text() and "trainer_type: poca" in text
-    r = learn([str(cfg), "--env", "stub:soccer_twos", "--num-areas", "16", "--seed", "2", "--run-id", "t",
-               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
-              cwd=tmp_path, timeout=900, env=env_no_proxy)
-    assert r.returncode == 0, r.stderr[-3000:]
-    acc = EventAccumulator(str(tmp_path / "results" / "t" / "SoccerTwos"), size_guidance={"scalars": 0})
-    acc.Reload()
+    acc = train_on_stub(tmp_path, cfg, "soccer_twos", "SoccerTwos", env_no_proxy, num_areas=16, seed=2, run_id="t",
+                        timeout=900)
     elo = [(e.step, e.value) for e in acc.Scalars("Self-play/ELO")]
     print(elo)
     assert elo[-1][0] == TWOS_STEPS
