@@ -9,8 +9,8 @@ baselines are always evaluated beside it. Printed per policy, for the scripted a
 throws: hit rate, the hit rate of the throws aimed above the pelvis (with their count: the ones
 fixed feet leave dodgeable), balance-loss rate, pass rate, mean effort (the effort terms' magnitudes summed
 over an episode, averaged over the episodes) and mean episode return. ``mimic``: per reference motion,
-the fraction of trials that kept their balance for 10 s and the mean reward terms r_r, r_v, r_m, r_e,
-r_t; then standing under pushes of growing impulse (``unity_stub_env.tasks.mimic.evaluate``), with
+the fraction of trials that kept their balance for 10 s, the percentage of the maximum reward
+and the mean reward terms r_r, r_v, r_m, r_e, r_t; then standing under pushes of growing impulse (``unity_stub_env.tasks.mimic.evaluate``), with
 an extra row for the PD controllers tracking the reference on their own. Tasks with an evaluation
 are the keys of ``_evaluations``.
 """
@@ -39,7 +39,7 @@ def _evaluations() -> dict:
 
 
 # The options ``--evaluate-option KEY=VALUE`` may set, per task (float values).
-OPTIONS = {"mimic": ("residual",)}
+OPTIONS = {"mimic": ("residual", "decision_hz", "effort_weight")}
 
 
 # Rows a task evaluates beside the baselines: label -> (policy, the task's evaluate options).
