@@ -35,6 +35,7 @@ from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
 from trainer.config.env_params import ConstantSampler, HmmSampler, hmm_model, hmm_sequences
 from trainer.config.env_vars import EnvVars
+from trainer.config.legacy import log_agent_steps
 from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
 from trainer.config.support import goal_conditioning_note
@@ -187,7 +188,9 @@ class RunState:
     _last_progress: float = float("-inf")
 
     # ------------------------------------------------------------------ behaviors
-    def ensure_runner(self, behavior_name: str) -> BehaviorRunner:
+    def ensure_runner(self, behavior_name: str, agents: int | None = None) -> BehaviorRunner:
+        """The behavior's runner, created at its first contact; ``agents`` (its agents in one
+        simulator, then) converts a 0.x file's step counts (RunOptions.behavior_settings)."""
         brain, _team = brain_name_of(behavior_name)
         runner = self.runners.get(brain)
         if runner is not None:
@@ -197,7 +200,9 @@ class RunState:
 
         opts = self.options
         logger.info("Connected new brain: %s", behavior_name)
-        settings = opts.behavior_settings(brain)
+        settings = opts.behavior_settings(brain, agents)
+        if opts.legacy_env_steps and agents is not None:
+            log_agent_steps(brain, agents, opts.behavior_settings(brain), settings)
         if settings.threaded:
             logger.warning("%s: threaded: true is accepted but has no effect here; updates run between "
                            "environment steps, as with threaded: false (same results, no policy lag).",
@@ -244,7 +249,8 @@ class RunState:
             for behavior in res.steps:
                 by_behavior.setdefault(behavior, []).append(env_id)
         for behavior, env_ids in by_behavior.items():
-            runner = self.ensure_runner(behavior)
+            first = results[env_ids[0]].steps[behavior]
+            runner = self.ensure_runner(behavior, len(np.union1d(first[0].agent_id, first[1].agent_id)))
             policy = runner.policy_for(brain_name_of(behavior)[1])  # self-play: maybe a snapshot
             # each env's deciding agents are the rows [start, end) of the one batched forward pass
             steps, start = [], 0
