@@ -3,12 +3,17 @@
 The level generator (docs/hmm.md): a track is a start platform, then ``zones`` zones cycling
 urban -> rural -> desert from ``first_zone``, each ``zone_length_min..zone_length_max``
 platforms (uniform, inclusive) emitted by that zone's 5-state platform HMM, with a
-``Transition`` platform (straight, no props) between two zones, as the thesis' platform
-controller does. Every zone platform has three spawn points (left, centre, right lane, filled
-left to right) whose props come from the zone's prop HMM, one label per spawn point, ``-``
-being the empty (epsilon) label. Models and corpora ship in ``runner_data/`` (how they are
-made: ``runner_data/make_models.py``). A track is a pure function of its seed and the zone
-parameters (``generate_track``).
+``Transition`` platform (straight, no props) between two zones, as the seed's platform
+controller does (docs/stub-tasks.md). Every zone platform has three spawn points (left, centre,
+right lane, filled left to right) whose props come from the zone's prop HMM, ``-`` being the empty
+(epsilon) label. A spawn point is stackable when it holds more than one object
+(``SPAWN_STACKS``, per zone and lane, as the seed's SpawnSettings isStackable / maxObjectStack):
+it takes that many labels of the chain, bottom first, and the stack ends at its first ``-`` or
+where a coin would sit on an obstacle or an obstacle on a coin (the labels above are dropped:
+nothing floats), so a lane holds k obstacles or k coins. The prop models have the seed's sizes
+(its largest generator: 20 states, 10 labels; urban here). Models and corpora ship in
+``runner_data/`` (how they are made: ``runner_data/make_models.py``). A track is a pure function
+of its seed and the zone parameters (``generate_track``).
 
 Physics: kinematic, in the track's own frame (cheap and deterministic; no MuJoCo). A platform
 is 4 m long and 3 m wide. The agent drives at a constant 4 m/s; its state is the distance s
@@ -25,18 +30,18 @@ Action: one continuous value a in [-1, 1] (steering rate; + = left).
 Observation, float32 [29]: y / 1.5, sin θ, cos θ, the fraction of the current platform done,
 then for the current platform and the 4 ahead: turn (+1 left, -1 right, 0 straight), 1 if it is
 past the end of the track (else 0), and per lane (left, centre, right) +1 coin, -1 obstacle, 0
-empty (props already passed read 0).
+empty, times the stack's height (k stacked obstacles read -k; props already passed read 0).
 Reward: +0.1 per platform length of progress, -0.3 per obstacle driven into (|y - lane| < 0.6
-when passing the spawn point, lanes at y = +1, 0, -1), +0.1 per coin, -1 and the end of the
+when passing the spawn point, lanes at y = +1, 0, -1; each object of a stack counts), +0.1 per coin, -1 and the end of the
 episode on falling off (|y| > 1.5), +1 and the end on finishing the track. Interrupted after
 max_step = 2000 steps (a 3-zone track of 8-platform zones takes ~135 steps).
 
-Environment parameters, read at every episode start (docs/configuration.md §6.7):
+Environment parameters, read at every episode start (docs/configuration.md, "Environment parameters"):
   ``track_seed`` (-1: a fresh seed in [0, 1e6) from the task's RNG; bench/ holds out seeds >= 1e6),
   ``zones`` (3), ``zone_length_min`` (4), ``zone_length_max`` (8), ``first_zone`` (-1 = random;
   0 urban, 1 rural, 2 desert). A curriculum lengthens tracks by raising the zone lengths.
-  ``track.*``: a platform sequence sent by an ``hmm`` sampler named ``track`` (docs/configuration.md
-  §6.7, encoding in docs/protocol.md §4.4): when ``track.count`` >= 1, each episode takes one of
+  ``track.*``: a platform sequence sent by an ``hmm`` sampler named ``track`` (docs/configuration.md;
+  its encoding: docs/protocol.md): when ``track.count`` >= 1, each episode takes one of
   the ``track.count`` sequences (chosen by the task's RNG) as its platforms, label codes read as
   0 Left, 1 Right, 2 Straight (the sorted labels of a model over those three), after the start
   platform, with the props of zone ``first_zone``.
@@ -79,6 +84,8 @@ OBS_SIZE = 4 + 5 * LOOKAHEAD
 HELD_OUT_SEED_START = 1_000_000
 START_DISTANCE = 1.0  # m into the start platform
 DEFAULTS = {"zones": 3, "zone_length_min": 4, "zone_length_max": 8, "first_zone": -1}
+# objects a spawn point holds at most (left, centre, right lane); more than 1 = stackable
+SPAWN_STACKS = {"urban": (1, 2, 1), "rural": (2, 1, 2), "desert": (1, 1, 3)}
 
 
 @functools.lru_cache(maxsize=None)
@@ -92,29 +99,47 @@ def zone_models(zone: str) -> tuple[Hmm, Hmm]:
 class Track:
     kinds: list[str]        # per platform: Start, Left, Right, Straight or Transition
     zones: list[int]        # per platform: 0 urban, 1 rural, 2 desert
-    props: list[list[str]]  # per platform: 3 labels (left, centre, right), '-' = empty
+    props: list[list[list[str]]]  # per platform and spawn point (left, centre, right): its stack, bottom first
 
     def turns(self) -> np.ndarray:
         return np.array([TURN_OF_KIND[kind] for kind in self.kinds], dtype=np.float64)
 
     def prop_codes(self) -> np.ndarray:
-        """int8 [P, 3]: +1 coin, -1 obstacle, 0 empty."""
-        return np.array([[0 if label == EPSILON_LABEL else 1 if label == COIN else -1 for label in row]
+        """int8 [P, 3]: per spawn point +k for k stacked coins, -k for k obstacles, 0 empty."""
+        return np.array([[sum(1 if label == COIN else -1 for label in stack) for stack in row]
                          for row in self.props], dtype=np.int8).reshape(len(self.props), 3)
 
 
-def _props(zone: int, count: int, rng: np.random.Generator) -> list[list[str]]:
-    """Props of ``count`` consecutive platforms: one chain of 3·count labels, 3 per platform; a
-    platform whose three spawn points all hold obstacles gets its centre emptied (the corpora
-    never block a whole platform, but an HMM's sample may)."""
+def stack(labels: list[str]) -> list[str]:
+    """The objects a stackable spawn point really holds, bottom first, from its share of the prop
+    chain: up to the first empty label or change between coin and obstacle."""
+    kept: list[str] = []
+    for label in labels:
+        if label == EPSILON_LABEL or (kept and (label == COIN) != (kept[0] == COIN)):
+            break
+        kept.append(label)
+    return kept
+
+
+def _props(zone: int, count: int, rng: np.random.Generator) -> list[list[list[str]]]:
+    """Props of ``count`` consecutive platforms: one chain of labels, each platform taking one per
+    place of its spawn points (SPAWN_STACKS), in spawn order, bottom first; a platform whose three
+    spawn points all hold obstacles gets its centre emptied (the corpora never block a whole
+    platform, but an HMM's sample may)."""
     if count == 0:
         return []
     model = zone_models(ZONES[zone])[1]
-    labels = model.decode(model.sample_codes(1, 3 * count, rng))[0]
-    rows = [labels[3 * i:3 * i + 3] for i in range(count)]
-    for row in rows:
-        if all(label not in (EPSILON_LABEL, COIN) for label in row):
-            row[1] = EPSILON_LABEL
+    sizes = SPAWN_STACKS[ZONES[zone]]
+    per_platform = sum(sizes)
+    labels = model.decode(model.sample_codes(1, per_platform * count, rng))[0]
+    bounds = np.cumsum((0,) + sizes)
+    rows = []
+    for i in range(count):
+        chain = labels[per_platform * i:per_platform * (i + 1)]
+        row = [stack(chain[bounds[j]:bounds[j + 1]]) for j in range(3)]
+        if all(spawn and spawn[0] != COIN for spawn in row):
+            row[1] = []
+        rows.append(row)
     return rows
 
 
@@ -125,7 +150,7 @@ def generate_track(seed: int, zones: int = 3, zone_length_min: int = 4, zone_len
     ``first_zone``'s props."""
     rng = np.random.default_rng(seed)
     first = int(rng.integers(0, len(ZONES))) if first_zone < 0 else int(first_zone) % len(ZONES)
-    kinds, zone_of, props = ["Start"], [first], [[EPSILON_LABEL] * 3]
+    kinds, zone_of, props = ["Start"], [first], [[[], [], []]]
     if platforms is not None:
         kinds += list(platforms)
         zone_of += [first] * len(platforms)
@@ -138,7 +163,7 @@ def generate_track(seed: int, zones: int = 3, zone_length_min: int = 4, zone_len
         if z:
             kinds.append("Transition")
             zone_of.append(zone)
-            props.append([EPSILON_LABEL] * 3)
+            props.append([[], [], []])
         length = int(rng.integers(low, high + 1))
         platform_model = zone_models(ZONES[zone])[0]
         kinds += platform_model.decode(platform_model.sample_codes(1, length, rng))[0]
@@ -265,8 +290,8 @@ class RunnerTask(Task):
         if len(crossed):
             props = self.props[crossed, platform[crossed]]  # [k, 3]
             near = np.abs(self.y[crossed, None] - LANES[None, :]) < HIT_RADIUS
-            hits = (near & (props < 0)).sum(axis=1)
-            coins = (near & (props > 0)).sum(axis=1)
+            hits = (near * np.maximum(-props, 0)).sum(axis=1)  # every object of a stack counts
+            coins = (near * np.maximum(props, 0)).sum(axis=1)
             rewards[crossed] += hits * OBSTACLE_REWARD + coins * COIN_REWARD
             self.obstacles_hit[crossed] += hits
             self.props[crossed, platform[crossed]] = 0  # behind the agent now
