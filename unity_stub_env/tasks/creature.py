@@ -172,8 +172,13 @@ def arena_xml(skeleton: Skeleton, num_areas: int) -> str:
             + "  </actuator>\n</mujoco>\n")
 
 
+def observation_size(skeleton: Skeleton) -> int:
+    """The observation's length for ``skeleton``: 14 + 10 per bone + 1 per hinge (module docstring)."""
+    return 14 + 10 * len(skeleton.bones) + skeleton.num_hinges()
+
+
 def _specs(skeleton: Skeleton) -> tuple[tuple[ObservationSpec, ...], ActionSpec]:
-    size = 14 + 10 * len(skeleton.bones) + skeleton.num_hinges()
+    size = observation_size(skeleton)
     return ((ObservationSpec((size,), (DimensionProperty.NONE,), ObservationType.DEFAULT, f"VectorSensor_size{size}"),),
             ActionSpec(continuous_size=skeleton.num_hinges(), discrete_branches=()))
 
