@@ -14,7 +14,7 @@ from trainer.run import environment_parameter_messages
 from unity_stub_env.communicator import SideChannelState
 from unity_stub_env.tasks import EnvironmentParameters, make_task
 from unity_stub_env.tasks import runner as R
-from unity_stub_env.tasks.runner_data import make_models
+from unity_stub_env.tasks.runner.data import make_models
 
 
 def _params(**values) -> EnvironmentParameters:

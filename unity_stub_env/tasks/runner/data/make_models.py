@@ -1,6 +1,6 @@
 """Write the runner's corpora and train its six HMMs (the files beside this script).
 
-    python -m unity_stub_env.tasks.runner_data.make_models          # rewrites *.txt and *.json
+    python -m unity_stub_env.tasks.runner.data.make_models          # rewrites *.txt and *.json
 
 The corpora are written from hand-made phrases, one list per zone (below): a line of a corpus
 is a random chain of that zone's phrases (seeded, so the files are reproducible). Each model is
