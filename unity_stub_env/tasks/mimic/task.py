@@ -314,7 +314,7 @@ class MimicTask(Task):
         self.push_interval = np.full(n, PUSH_INTERVAL)
         self.max_drift = np.full(n, MAX_DRIFT)
         self.effort_weight = np.zeros(n)
-        self.last_effort = np.zeros(n)  # the mean relative actuator force of the last decision
+        self.last_effort = np.zeros(n)  # the mean relative actuator force of the last decision (0 if no effort_weight)
         self.term_sum = np.zeros((n, 5))
         self.last_terms = np.zeros((n, 5))
         self.last_fell = np.zeros(n, dtype=bool)
@@ -452,10 +452,12 @@ class MimicTask(Task):
                                                                       np.zeros(len(azimuth))])
             self.last_push[due] = impulse
             data.xfrc_applied[self.torso[due], :3] = impulse / dt
+        measure = bool(self.effort_weight.any())  # the effort costs a gather per MuJoCo step: only when used
         force = np.zeros(n)
         for _ in range(self.substeps):
             mujoco.mj_step(self.model, data)
-            force += (np.abs(data.actuator_force[self.actuator]) / self.force_limit).mean(axis=1)
+            if measure:
+                force += (np.abs(data.actuator_force[self.actuator]) / self.force_limit).mean(axis=1)
         self.last_effort = force / self.substeps
         if due.any():
             data.xfrc_applied[self.torso[due], :3] = 0.0
