@@ -1,5 +1,6 @@
-"""Learning smoke test for ``creature`` (seed 002): our trainer, the stub as a separate process over
-real gRPC, 4 arenas with the default quadruped on flat ground, a fixed seed, 40,000 steps.
+"""Learning smoke test for ``creature`` (the creature report, docs/stub-tasks.md): our trainer, the
+stub as a separate process over real gRPC, 4 arenas with the default quadruped on flat ground, a
+fixed seed, 40,000 steps.
 
 configs/creature.yaml (Walker's 3 x 512 network, 30 M steps) is a bench run (bench/RESULTS.md);
 this test uses a 64 x 2 network with a higher learning rate. What it learns in 40,000 steps is to

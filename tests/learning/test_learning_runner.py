@@ -1,4 +1,4 @@
-"""The runner (seed 004) through mlagents-like-learn and the stub as a separate process: an hmm
+"""The runner (docs/stub-tasks.md) through mlagents-like-learn and the stub as a separate process: an hmm
 sampler's tracks reach the simulator, and PPO learns to drive HMM-generated tracks."""
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Typed, frozen run configuration in the ML-Agents Release-22 schema (docs/configuration.md §5, docs/configuration.md §6).
+"""Typed, frozen run configuration in the ML-Agents Release-22 schema (docs/configuration.md, "Command
+line" and "YAML").
 
 Field order is the order ``configuration.yaml`` is written in, which follows the reference.
 Every default is the reference default. Building these from YAML (with all the checks) is

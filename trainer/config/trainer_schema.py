@@ -1,4 +1,5 @@
-"""Raw ``behaviors.<name>`` / ``default_settings`` blocks -> checked ``TrainerSettings`` (docs/configuration.md §6.2-§6.6)."""
+"""Raw ``behaviors.<name>`` / ``default_settings`` blocks -> checked ``TrainerSettings`` (docs/configuration.md,
+"Per behavior" and the sections after it)."""
 from __future__ import annotations
 
 import dataclasses
