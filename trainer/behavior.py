@@ -21,7 +21,7 @@ from trainer import crash_points
 from trainer.artifacts.checkpoints import CheckpointError, checkpoint_step, load_checkpoint, save_checkpoint
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
 from trainer.errors import ConfigError, UserError
-from trainer.ppo.buffer import Trajectory
+from trainer.common.trajectory import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
 from trainer.ppo.trainer import PPOTrainer
 from trainer.selfplay import ELO_STAT, SelfPlay, TeamController
@@ -284,7 +284,7 @@ class BehaviorRunner:
         files of later steps (a checkpoint the killed run had not finished, or a damaged one) and
         orphan halves (a .pt without its .onnx or the reverse) are removed, the resumed step's
         missing .onnx is exported again, and checkpoints beyond keep_checkpoints are deleted
-        (leftover temp files went earlier: ``trainer.run.prepare_run_dir``)."""
+        (leftover temp files went earlier: ``trainer.results_dir.prepare_run_dir``)."""
         step = self.trainer.step
         removed: list[str] = []
         on_disk = self.paths.steps_on_disk()

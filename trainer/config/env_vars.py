@@ -16,7 +16,7 @@ environment: ``MLAGENTS_LIKE_IMAGE`` (run inside that container image) and ``MLA
 =============================  ================  ====================================================
 variable                       field             default and meaning
 =============================  ================  ====================================================
-MLAGENTS_LIKE_TORCH_THREADS    ``torch_threads``  1: torch's intra-op threads (trainer/run.py)
+MLAGENTS_LIKE_TORCH_THREADS    ``torch_threads``  1: torch's intra-op threads (trainer/run_setup.py)
 MLAGENTS_LIKE_BLAS_THREADS     ``blas_threads``   None: numpy's BLAS gets 1 thread unless the user set
                                                  OPENBLAS_NUM_THREADS / OMP_NUM_THREADS /
                                                  MKL_NUM_THREADS (trainer/cli.py)

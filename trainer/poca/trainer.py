@@ -36,10 +36,11 @@ import torch
 from protos.types import BehaviorSpec
 from trainer.errors import ConfigError
 from trainer.poca.networks import POCACritic
-from trainer.ppo.buffer import GroupColumns, Trajectory
-from trainer.ppo.gae import gae
+from trainer.common.trajectory import GroupColumns, Trajectory
+from trainer.common.gae import gae
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.losses import masked_mean, policy_loss, ppo_loss, value_loss
+from trainer.common.masked import masked_mean
+from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
 from trainer.ppo.trainer import PPOTrainer, _obs_key
 
 GROUP_FIELDS = ("mates_continuous", "mates_discrete", "mates_present")

@@ -14,17 +14,20 @@ import torch
 
 from trainer.config.support import SUPPORTED_REWARD_SIGNALS
 from trainer.errors import ConfigError
-from trainer.ppo import numpy_net, numpy_update
-from trainer.ppo.adam import Adam
-from trainer.ppo.buffer import Trajectory, UpdateBuffer
-from trainer.ppo.numpy_net import NumpyCritic
-from trainer.ppo.gae import gae
+from trainer.common import numpy_net
+from trainer.ppo import numpy_update
+from trainer.common.adam import Adam
+from trainer.common.trajectory import Trajectory
+from trainer.ppo.update_buffer import UpdateBuffer
+from trainer.common.numpy_net import NumpyCritic
+from trainer.common.gae import gae
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.losses import masked_mean, policy_loss, ppo_loss, value_loss
-from trainer.ppo.networks import Critic
-from trainer.ppo.policy import Policy
-from trainer.ppo.reward_providers import Experience, load_providers, make_providers
-from trainer.ppo.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
+from trainer.common.masked import masked_mean
+from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
+from trainer.common.networks import Critic
+from trainer.common.policy import Policy
+from trainer.common.reward_providers import Experience, load_providers, make_providers
+from trainer.common.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
 from protos.types import BehaviorSpec
 
 ADVANTAGE_STD_EPSILON = 1e-10
@@ -412,7 +415,7 @@ class PPOTrainer:
     def normalizers(self) -> list:
         """Every observation normaliser of the actor, the critic and the curiosity / rnd networks
         (a shared body's once), in a fixed order."""
-        from trainer.ppo.normalizer import Normalizer
+        from trainer.common.normalizer import Normalizer
 
         modules = [self.policy.actor, self.critic]
         modules += [getattr(p, name) for p in self.providers.values() for name in ("network", "target", "predictor")

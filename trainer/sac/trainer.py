@@ -7,7 +7,7 @@ One trainer per brain, with the PPOTrainer's interface for the run loop (``proce
 * a value network V(s) and its target copy (soft-updated with ``tau`` after every step);
 * twin Q networks Q1, Q2 (s, continuous actions) -> a value per discrete option (or one);
 * log entropy coefficients: one for the continuous block, one per discrete branch;
-* curiosity / rnd learners (trainer/ppo/reward_providers.py, shared with PPO), which reward
+* curiosity / rnd learners (trainer/common/reward_providers.py, shared with PPO), which reward
   each sampled minibatch afresh and learn on minibatches of their own, one per
   ``reward_signal_steps_per_update`` agent steps (as the reference does).
 
@@ -29,12 +29,12 @@ from torch import nn
 from protos.types import BehaviorSpec
 from trainer.config.support import SUPPORTED_REWARD_SIGNALS
 from trainer.errors import ConfigError
-from trainer.ppo import numpy_net
-from trainer.ppo.adam import Adam
-from trainer.ppo.buffer import Trajectory
-from trainer.ppo.networks import Critic, NetworkBody
-from trainer.ppo.reward_providers import Experience, load_providers, make_providers
-from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
+from trainer.common import numpy_net
+from trainer.common.adam import Adam
+from trainer.common.trajectory import Trajectory
+from trainer.common.networks import Critic, NetworkBody
+from trainer.common.reward_providers import Experience, load_providers, make_providers
+from trainer.common.schedules import LEARNING_RATE_FLOOR, decay
 from trainer.ppo.trainer import PPOTrainer
 from trainer.sac import losses, numpy_step
 from trainer.sac.hyperparams import SACHyperparams

@@ -34,11 +34,11 @@ import numpy as np
 import torch
 from torch import nn
 
-from trainer.ppo.adam import Adam
+from trainer.common.adam import Adam
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
-from trainer.ppo.layers import KAIMING_NORMAL, Swish, linear_layer
-from trainer.ppo.losses import masked_mean
-from trainer.ppo.networks import NetworkBody
+from trainer.common.layers import KAIMING_NORMAL, Swish, linear_layer
+from trainer.common.masked import masked_mean
+from trainer.common.networks import NetworkBody
 from protos.types import ActionSpec, BehaviorSpec
 
 logger = logging.getLogger("mlagents_like")
@@ -226,7 +226,7 @@ GAIL_GRADIENT_PENALTY = 10.0
 GAIL_VAIL_ALPHA = 0.0005  # VAIL's beta step
 GAIL_MUTUAL_INFORMATION = 0.5  # VAIL's information constraint I_c
 GAIL_EPSILON = 1e-7
-CONTINUOUS_CLIP = 3.0  # PPO's env actions: clamp(a, -3, 3) / 3 (trainer/ppo/policy.py)
+CONTINUOUS_CLIP = 3.0  # PPO's env actions: clamp(a, -3, 3) / 3 (trainer/common/policy.py)
 
 
 class DiscriminatorNetwork(nn.Module):
