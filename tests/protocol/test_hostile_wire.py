@@ -1,4 +1,4 @@
-"""Hostile clients against the trainer's HTTP/2 server (protos/http2.py), beyond single-frame
+"""Hostile clients against the trainer's HTTP/2 server (trainer/protocol/http2_server.py), beyond single-frame
 RFC cases (those are in test_http2_conformance.py): a second client on a port held by a live
 session, floods of idle connections, slow-loris, many half-sent requests, and a property test
 throwing random and mutated frame sequences at a live transport while a well-behaved client
@@ -24,6 +24,7 @@ from protos.http2 import (
     CONTINUATION, DATA, END_HEADERS, END_STREAM, GOAWAY, HEADERS, PING, SETTINGS, WINDOW_UPDATE, frame,
 )
 from tests.protocol.conftest import BIG, ScriptedUnity, agent_info, brain_params, free_port, m1, m2, rl_message
+from trainer.protocol import http2_server
 from trainer.protocol.server import EXCHANGE_PATH, UnityEndpoint
 from unity_stub_env.http2_client import CallError, Http2Channel, request_headers
 
@@ -40,7 +41,7 @@ def request(stream_id: int, body: bytes = HELLO) -> bytes:
 
 @pytest.fixture
 def transport():
-    t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+    t = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
     t.start()
     yield t
     t.close(grace=0.1)
@@ -227,7 +228,7 @@ def test_closed_transports_hold_no_read_buffer_even_when_something_still_refers_
     try:
         before = tracemalloc.get_traced_memory()[0]
         for _ in range(10):
-            t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+            t = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
             t.start()
             good = GoodClient(t)
             assert good.call(b"m1") == b"ok"  # a session, as a simulator's
@@ -249,12 +250,12 @@ def test_idle_connections_are_capped_and_hold_no_read_buffer_each(transport, cap
     before = tracemalloc.get_traced_memory()[0]
     idle = []
     with caplog.at_level(logging.WARNING, logger="protos.http2"):
-        for _ in range(3 * http2.MAX_CONNECTIONS):
+        for _ in range(3 * http2_server.MAX_CONNECTIONS):
             idle.append(socket.create_connection(("127.0.0.1", transport.port), timeout=5))
             idle[-1].sendall(PREAMBLE)
             transport.poll()
             transport.poll()
-            assert len(transport._connections) <= http2.MAX_CONNECTIONS
+            assert len(transport._connections) <= http2_server.MAX_CONNECTIONS
     held = tracemalloc.get_traced_memory()[0] - before
     tracemalloc.stop()
     assert held < 256 * 1024, held  # (each connection used to keep a 1 MiB receive buffer)
@@ -269,7 +270,7 @@ def test_idle_connections_are_capped_and_hold_no_read_buffer_each(transport, cap
 @pytest.mark.parametrize("what, setting", [("preface", "PREFACE_TIMEOUT_S"), ("idle", "IDLE_TIMEOUT_S")])
 def test_slow_loris_and_idle_connections_are_closed_but_never_the_session(transport, monkeypatch, caplog, what,
                                                                             setting):
-    monkeypatch.setattr(http2, setting, 0.3)
+    monkeypatch.setattr(http2_server, setting, 0.3)
     good = GoodClient(transport)
     assert good.call(b"m1") == b"ok"
     slow = socket.create_connection(("127.0.0.1", transport.port), timeout=5)
@@ -359,18 +360,18 @@ def hostile_bytes(draw):
 
 
 def _bounded(transport) -> None:
-    assert len(transport._connections) <= http2.MAX_CONNECTIONS
+    assert len(transport._connections) <= http2_server.MAX_CONNECTIONS
     for connection in transport._connections.values():
-        assert len(connection.buffer) <= http2.OUR_MAX_FRAME + 9 + http2._RECV_BYTES
-        assert len(connection.out) <= http2.MAX_UNSENT
-        assert len(connection.streams) <= http2.MAX_STREAMS
+        assert len(connection.buffer) <= http2.OUR_MAX_FRAME + 9 + http2.RECV_BYTES
+        assert len(connection.out) <= http2_server.MAX_UNSENT
+        assert len(connection.streams) <= http2_server.MAX_STREAMS
         assert sum(len(s.body) for s in connection.streams.values()) <= transport.max_message_bytes + 5
 
 
 @pytest.fixture(scope="module")
 def shared():
     """One live transport for every example, its session held by a well-behaved client."""
-    t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+    t = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
     t.start()
     good = GoodClient(t)
     assert good.call(b"first") == b"ok"
@@ -415,7 +416,7 @@ def test_random_and_mutated_frames_as_the_first_client_end_in_a_call_or_a_closed
     or its connection closed, nothing escapes; once it leaves, a simulator connecting next is
     served unless the hostile one had left a call unanswered (then the trainer is told:
     ``client_gone``, and a real run restarts that simulator)."""
-    transport = http2.Http2Transport("127.0.0.1", 0, EXCHANGE_PATH, max_message_bytes=1000)
+    transport = http2_server.Http2Transport("127.0.0.1", 0, EXCHANGE_PATH, max_message_bytes=1000)
     transport.start()
     try:
         sock = socket.create_connection(("127.0.0.1", transport.port), timeout=5)
@@ -441,7 +442,7 @@ def test_random_and_mutated_frames_as_the_first_client_end_in_a_call_or_a_closed
 
 @pytest.mark.timeout(20)  # refusing it used to wait up to 30 s in sendall for the intruder to read
 def test_refusing_an_intruder_that_does_not_read_never_blocks_the_trainer(transport, monkeypatch):
-    monkeypatch.setattr(http2, "MAX_UNSENT", 64 << 20)  # keep it connected while its buffers fill
+    monkeypatch.setattr(http2_server, "MAX_UNSENT", 64 << 20)  # keep it connected while its buffers fill
     good = GoodClient(transport)
     assert good.call(b"m1") == b"ok"
     intruder = socket.socket()

@@ -19,6 +19,7 @@ import hpack
 import pytest
 
 from tests.protocol.conftest import free_port
+from trainer.protocol import http2_server
 from trainer.errors import UnityTimeOutError
 from protos import http2
 from protos.http2 import (
@@ -55,7 +56,7 @@ def setting(key: int, value: int) -> bytes:
 
 @pytest.fixture
 def transport():
-    t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+    t = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
     t.start()
     yield t
     t.close(grace=0.1)
