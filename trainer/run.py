@@ -206,7 +206,7 @@ class RunState:
     def _tracker(self, env_id: int, behavior: str, runner: BehaviorRunner) -> AgentTracker:
         tracker = self.trackers.get((env_id, behavior))
         if tracker is None:
-            kind = GroupTracker if getattr(runner.trainer, "uses_groups", False) else AgentTracker  # POCA
+            kind = GroupTracker if runner.trainer.uses_groups else AgentTracker  # POCA
             tracker = kind(runner.spec, runner.settings.time_horizon, memory_size=runner.trainer.policy.memory_size)
             self.trackers[(env_id, behavior)] = tracker
         return tracker

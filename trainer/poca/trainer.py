@@ -176,7 +176,8 @@ class POCATrainer(PPOTrainer):
             advantages.append(returns - baselines[name])
             fields[f"baselines:{name}"] = baselines[name]
             fields[f"returns:{name}"] = returns
-            label = getattr(self.providers.get(name), "stat_name", name.capitalize())
+            provider = self.providers.get(name)
+            label = name.capitalize() if provider is None else provider.stat_name
             stats[f"Policy/{label} Value Estimate"] = float(np.mean(values[name]))
             stats[f"Policy/{label} Baseline Estimate"] = float(np.mean(baselines[name]))
         if traj.done:
