@@ -97,7 +97,7 @@ def test_a_second_client_cannot_inject_calls_into_a_live_session(transport, capl
     assert good.call(b"m1") == b"ok"  # the session: the connection whose call the trainer took
     intruder = socket.create_connection(("127.0.0.1", transport.port), timeout=5)
     intruder.sendall(PREAMBLE + request(1, b"\x00" + struct.pack(">I", 6) + b"inject"))
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         for _ in range(5):
             assert transport.take(0.02) is None  # nothing reaches the trainer
     frames = read_until_closed(intruder)
@@ -109,7 +109,7 @@ def test_a_second_client_cannot_inject_calls_into_a_live_session(transport, capl
     message = fields[b"grpc-message"].decode()
     assert f"port {transport.port} is held by a live training session with 127.0.0.1:" in message
     assert [struct.unpack_from(">II", p) for kind, _, _, p in frames if kind == GOAWAY] == [(1, 0)]
-    (line,) = [r.getMessage() for r in caplog.records if r.name == "protos.http2"]
+    (line,) = [r.getMessage() for r in caplog.records if r.name == "trainer.protocol.http2_server"]
     assert line.startswith("Closing the connection from 127.0.0.1:") and "held by a live training session" in line
     assert not transport.client_gone
     assert good.call(b"m2", b"still served") == b"still served"
@@ -249,7 +249,7 @@ def test_idle_connections_are_capped_and_hold_no_read_buffer_each(transport, cap
     tracemalloc.start()
     before = tracemalloc.get_traced_memory()[0]
     idle = []
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         for _ in range(3 * http2_server.MAX_CONNECTIONS):
             idle.append(socket.create_connection(("127.0.0.1", transport.port), timeout=5))
             idle[-1].sendall(PREAMBLE)
@@ -276,7 +276,7 @@ def test_slow_loris_and_idle_connections_are_closed_but_never_the_session(transp
     slow = socket.create_connection(("127.0.0.1", transport.port), timeout=5)
     # slow-loris: the preface a byte at a time; idle: a whole preface, then nothing
     slow.sendall(http2.PREFACE[:3] if what == "preface" else PREAMBLE)
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         for _ in range(100):
             transport.poll()
             if len(transport._connections) == 1:
@@ -300,7 +300,7 @@ def test_many_half_sent_requests_together_cannot_buffer_more_than_one_message(tr
     data = b"".join(frame(HEADERS, END_HEADERS, sid, HEADER_BLOCK) + frame(DATA, 0, sid, b"\0" * 900)
                     for sid in range(1, 32, 2))  # 16 streams, each under the 1000-byte limit
     sock.sendall(data)
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         for _ in range(5):
             transport.poll()
     (connection,) = transport._connections.values()
