@@ -72,7 +72,7 @@ _VERSION_RE = re.compile(r"(\d+)\.(\d+)(?:\.(\d+))?(?:[ab]\d+)?")  # StrictVersi
 
 # --------------------------------------------------------------------------- handshake helpers
 def check_communication_version(unity_version: str) -> None:
-    """Raise UnityVersionError unless Unity's communication API can talk to ours (docs/protocol.md §1.6).
+    """Raise UnityVersionError unless Unity's communication API can talk to ours (docs/protocol.md, "Version checks").
 
     Unity major 0: major and minor must equal ours. Otherwise the majors must be equal.
     """
@@ -99,7 +99,7 @@ def check_communication_version(unity_version: str) -> None:
 
 # --------------------------------------------------------------------------- behavior specs
 # Bounds on what a simulator may declare, checked before anything is allocated for it
-# (docs/protocol.md §3.2, "Limits"). Real games declare tens of actions and observations of at
+# (docs/protocol.md, "Behavior spec", "Limits"). Real games declare tens of actions and observations of at
 # most a few hundred thousand floats; these leave a wide margin and keep the trainer's memory
 # for one behavior within a budget: the policy's output layer is at most
 # (MAX_CONTINUOUS_ACTIONS + MAX_DISCRETE_OPTIONS) x hidden_units floats (36 MiB at 512 units),
@@ -115,7 +115,7 @@ MAX_DECODED_IMAGE_BYTES = 1 << 30
 
 
 def behavior_spec_from_proto(brain_params, agent_info) -> BehaviorSpec:
-    """BrainParametersProto + the behavior's first AgentInfoProto → BehaviorSpec (docs/protocol.md §3.2).
+    """BrainParametersProto + the behavior's first AgentInfoProto → BehaviorSpec (docs/protocol.md, "Behavior spec").
 
     Raises ProtocolError for a spec the trainer cannot train, or one beyond the limits above."""
     name = brain_params.brain_name
@@ -318,7 +318,8 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec],
 
 def _drop_non_finite(behavior: str, fields: records.Decoded) -> tuple[records.Decoded, Dropped | None]:
     """``fields`` without the agents whose reward, group reward or any observation holds NaN or
-    Inf (docs/protocol.md §3.1): they never reach the networks. Also what was dropped, or None."""
+    Inf (docs/protocol.md, "Simulator → trainer"): they never reach the networks. Also what was dropped,
+    or None."""
     # the common message: NaN and Inf propagate into a Python sum of the rewards (0.3 us for 12
     # agents, where two numpy checks cost 2 us), then one pass over each observation array
     if (math.isfinite(sum(fields.reward.tolist()) + sum(fields.group_reward.tolist()))

@@ -609,7 +609,7 @@ class Http2Transport:
         self._ready: collections.deque[IncomingCall] = collections.deque()
         self.reader = ReadBuffer()
         # the connection whose calls the trainer takes; others are refused while it lives, so a
-        # second client on the port cannot inject steps into the session (docs/protocol.md §1.8)
+        # second client on the port cannot inject steps into the session (docs/protocol.md, "Malformed HTTP/2")
         self.session: _Connection | None = None
         self._next_sweep = 0.0
 
