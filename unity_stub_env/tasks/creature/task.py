@@ -1,6 +1,6 @@
 """``creature``: a generated creature learns to walk to targets over generated terrain (the task;
-``terrain.py`` draws the heightfields, ``evaluation.py`` measures a policy; the seed project it
-follows is cited in docs/stub-tasks.md).
+``terrain.py`` draws the heightfields, ``evaluation.py`` measures a policy; the creature report it
+follows: docs/stub-tasks.md, "Seed projects").
 
 One agent per area. Each area is an arena: a 20 m x 20 m heightfield (flat, or Perlin noise whose
 height is set by the roughness), four walls 1 m high, optional box obstacles, and a target; the

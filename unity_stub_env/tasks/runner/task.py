@@ -4,8 +4,8 @@
 The level generator (docs/hmm.md): a track is a start platform, then ``zones`` zones cycling
 urban -> rural -> desert from ``first_zone``, each ``zone_length_min..zone_length_max``
 platforms (uniform, inclusive) emitted by that zone's 5-state platform HMM, with a
-``Transition`` platform (straight, no props) between two zones, as the seed's platform
-controller does (docs/stub-tasks.md). Every zone platform has three spawn points (left, centre,
+``Transition`` platform (straight, no props) between two zones, as the runner thesis' platform
+controller does (docs/stub-tasks.md, "Seed projects"). Every zone platform has three spawn points (left, centre,
 right lane, filled left to right) whose props come from the zone's prop HMM, ``-`` being the empty
 (epsilon) label. A spawn point is stackable when it holds more than one object
 (``SPAWN_STACKS``, per zone and lane, as the seed's SpawnSettings isStackable / maxObjectStack):
@@ -37,15 +37,16 @@ when passing the spawn point, lanes at y = +1, 0, -1; each object of a stack cou
 episode on falling off (|y| > 1.5), +1 and the end on finishing the track. Interrupted after
 max_step = 2000 steps (a 3-zone track of 8-platform zones takes ~135 steps).
 
-Environment parameters, read at every episode start (docs/configuration.md, "Environment parameters"):
+Environment parameters, read at every episode start (docs/configuration.md, "environment_parameters"):
   ``track_seed`` (-1: a fresh seed in [0, 1e6) from the task's RNG; bench/ holds out seeds >= 1e6),
   ``zones`` (3), ``zone_length_min`` (4), ``zone_length_max`` (8), ``first_zone`` (-1 = random;
   0 urban, 1 rural, 2 desert). A curriculum lengthens tracks by raising the zone lengths.
-  ``track.*``: a platform sequence sent by an ``hmm`` sampler named ``track`` (docs/configuration.md;
-  its encoding: docs/protocol.md): when ``track.count`` >= 1, each episode takes one of
-  the ``track.count`` sequences (chosen by the task's RNG) as its platforms, label codes read as
-  0 Left, 1 Right, 2 Straight (the sorted labels of a model over those three), after the start
-  platform, with the props of zone ``first_zone``.
+  ``track.*``: a platform sequence sent by an ``hmm`` sampler named ``track``
+  (docs/configuration.md, "environment_parameters"; encoding in docs/protocol.md, "Label
+  sequences"): when ``track.count`` >= 1, each episode takes one of the ``track.count`` sequences
+  (chosen by the task's RNG) as its platforms, label codes read as 0 Left, 1 Right, 2 Straight (the
+  sorted labels of a model over those three), after the start platform, with the props of zone
+  ``first_zone``.
 """
 from __future__ import annotations
 
