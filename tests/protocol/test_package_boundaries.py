@@ -2,6 +2,8 @@
 
 * ``protos`` (the wire contract) imports neither ``trainer`` nor ``unity_stub_env``;
 * ``unity_stub_env`` imports ``protos``, itself and third-party libraries, never ``trainer``;
+  the Gymnasium and PettingZoo forms (the ``gym`` extra) are imported only in ``unity_stub_env/gym/``,
+  so the stub runs without them;
 * ``trainer`` uses only the stub's public API: names in ``unity_stub_env.__all__``, imported from
   the package itself (``from unity_stub_env import TASK_NAMES``), never a stub module.
 
@@ -62,6 +64,14 @@ def test_package_imports_none_of(package, forbidden):
     bad = [f"{where}:{line} imports {module}" for where, line, module, _ in imports(package)
            if top(module) in forbidden]
     assert bad == []
+
+
+def test_only_the_stubs_gym_package_imports_the_gym_extra():
+    bad = [f"{where}:{line} imports {module}" for where, line, module, _ in imports("unity_stub_env")
+           if top(module) in {"gymnasium", "pettingzoo"} and not where.startswith("unity_stub_env/gym/")]
+    assert bad == []
+    assert any(where.startswith("unity_stub_env/gym/") and top(module) == "gymnasium"
+               for where, _, module, _ in imports("unity_stub_env"))  # the scan sees that package
 
 
 def test_trainer_uses_only_the_stubs_public_api():
