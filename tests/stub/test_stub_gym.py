@@ -185,8 +185,9 @@ def test_pettingzoo_parallel_form_passes_its_api_test(task):
     parallel_api_test(stub_gym.parallel_env(task), num_cycles=300)
 
 
-def test_pettingzoo_rewards_add_the_group_reward():
-    """pushblock, one area: each agent's reward is its own plus its group's, as the scene reports them."""
+def test_pettingzoo_rewards_and_group_rewards_as_ml_agents_wrappers_report_them():
+    """pushblock, one area: each agent's reward is its own, its group's reward is in its infos,
+    as the scene reports them."""
     env = stub_gym.parallel_env("unity_stub_env/PushBlock-v0")
     reference = Scene("pushblock", seed=4)
     env.reset(seed=4)
@@ -196,11 +197,13 @@ def test_pettingzoo_rewards_add_the_group_reward():
         if not env.agents:
             break
         action = rng.integers(0, 5, reference.num_agents)
-        rewards = env.step({name: action[row] for row, name in enumerate(env.agents)})[1]
+        _, rewards, _, _, infos = env.step({name: action[row] for row, name in enumerate(env.agents)})
         result = reference.step(np.zeros((reference.num_agents, 0), np.float32), action[:, None].astype(np.int32))
         for row, name in enumerate(env.possible_agents):
             if name in rewards:
-                assert rewards[name] == pytest.approx(result.rewards[row] + result.group_rewards[row])
+                assert rewards[name] == pytest.approx(result.rewards[row])
+                assert infos[name]["group_reward"] == pytest.approx(result.group_rewards[row])
+                assert infos[name]["group_id"] == reference.task.group_ids()[row]
         group_seen |= bool(np.any(result.group_rewards != 0))
     assert group_seen
     assert env.possible_agents[0] == "PushBlock?team=0?agent_id=0"

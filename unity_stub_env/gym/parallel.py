@@ -4,9 +4,11 @@
 
 Agents are named ``<behavior>?team=<t>?agent_id=<row>`` (the behavior key Unity sends, then the
 agent's row in the scene), so the name says which policy an agent belongs to (soccer: one
-behavior per team). An agent's reward is its own reward plus its group's (Unity's
-``AddGroupReward``), as ML-Agents' PettingZoo wrapper reports them. An agent whose episode ended
-leaves ``agents`` until the next ``reset``; the scene keeps it acting with zero actions meanwhile.
+behavior per team). Rewards and infos follow ML-Agents' PettingZoo wrappers (and ours,
+``mlagents_like_envs.envs``): the reward is the agent's own, ``infos[agent]`` holds
+``behavior_name``, ``group_id`` and ``group_reward`` (Unity's ``AddGroupReward``: add it for
+pushblock and dungeon, whose rewards are all group rewards). An agent whose episode ended leaves
+``agents`` until the next ``reset``; the scene keeps it acting with zero actions meanwhile.
 """
 from __future__ import annotations
 
@@ -29,9 +31,11 @@ class StubParallelEnv(ParallelEnv):
                            env_params=env_params)
         self.metadata = {**self.metadata, "name": f"unity_stub_env_{task}"}
         names = np.empty(self.scene.num_agents, dtype=object)
+        self._behavior: dict[str, str] = {}
         for key, rows in self.scene.task.behaviors():
             indices = np.arange(self.scene.num_agents)[rows]
             names[indices] = [f"{key}?agent_id={row}" for row in indices]
+            self._behavior.update({f"{key}?agent_id={row}": key for row in indices})
         self.possible_agents: list[str] = names.tolist()
         self._row = {name: row for row, name in enumerate(self.possible_agents)}
         obs_space = spaces.observation_space(self.scene.observation_specs)
@@ -62,7 +66,14 @@ class StubParallelEnv(ParallelEnv):
                 self.action_spaces[name].seed(seed + self._row[name])
         self.agents = list(self.possible_agents)
         self._live[:] = True
-        return self._per_agent(observations, self.agents), {name: {} for name in self.agents}
+        return self._per_agent(observations, self.agents), self._infos(self.agents, None)
+
+    def _infos(self, names: list[str], group_rewards: np.ndarray | None) -> dict[str, dict]:
+        groups = self.scene.task.group_ids()
+        return {name: {"behavior_name": self._behavior[name],
+                       "group_id": 0 if groups is None else int(groups[self._row[name]]),
+                       "group_reward": 0.0 if group_rewards is None else float(group_rewards[self._row[name]])}
+                for name in names}
 
     def step(self, actions: dict[str, Any]):
         scene = self.scene
@@ -82,12 +93,11 @@ class StubParallelEnv(ParallelEnv):
         if ended.any():  # agents that ended report their episode's last observation
             observations = [np.where(ended.reshape(-1, *[1] * (o.ndim - 1)), f, o)
                             for o, f in zip(result.observations, result.final_observations)]
-        total = result.rewards + result.group_rewards
         obs = self._per_agent(observations, live)
-        rewards = {name: float(total[self._row[name]]) for name in live}
+        rewards = {name: float(result.rewards[self._row[name]]) for name in live}
         terminations = {name: bool(result.terminated[self._row[name]]) for name in live}
         truncations = {name: bool(result.truncated[self._row[name]]) for name in live}
-        infos = {name: {} for name in live}
+        infos = self._infos(live, result.group_rewards)
         self._live &= ~ended
         self.agents = [name for name in live if self._live[self._row[name]]]
         return obs, rewards, terminations, truncations, infos
