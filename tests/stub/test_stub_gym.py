@@ -245,3 +245,23 @@ def test_agents_per_area_makes_one_agent_scenes_of_independent_tasks_only(capsys
         make_task("pushblock", agents_per_area=1)
     assert main(["--task", "soccer", "--agents-per-area", "1", "--mlagents-port", "5005"]) == 2
     assert "soccer cannot take it" in capsys.readouterr().err
+
+
+def test_the_docs_table_of_ids_is_the_generated_one():
+    from unity_stub_env.gym.__main__ import ids_table
+
+    assert ids_table() in (Path(REPO) / "docs" / "python-api.md").read_text()
+
+
+def test_the_cleanrl_example_runs():
+    example = Path(REPO) / "docs" / "examples" / "cleanrl_envs.py"
+    done = subprocess.run([sys.executable, str(example)], env={**os.environ, "PYTHONPATH": REPO},
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith("4 single-plate envs:") and lines[1].startswith("one area of 12 plates:")
+    # random play drops the ball within a few dozen decisions: many episodes, returns of a few
+    # tenths of the 100 possible (the batched form: unnormalised returns, +0.1 a decision, -1 at the fall)
+    episodes = int(lines[1].split(": ")[1].split()[0])
+    mean = float(lines[1].rsplit(" ", 1)[1])
+    assert episodes >= 40 and 0.0 < mean < 5.0
