@@ -6,8 +6,8 @@ Measures, in one run on the same machine:
   (i)   our UnityEndpoint answering every step with a preallocated all-zero ActionTuple, against
         the stub ``basic`` running as a separate process (``--num-areas`` 16 and 64 agents);
   (ii)  the real mlagents_envs 1.1.0 UnityEnvironment (in .venv-interop, its own process) with
-        random actions against the same stub and agent counts, and our mlagents_like_envs
-        UnityEnvironment running the very same loop (bench/peers/mlagents_envs_rollout.py);
+        random actions against the same stub and agent counts (bench/envs_api.py runs our
+        mlagents_like_envs UnityEnvironment through the very same loop against it);
   (iii) the stub's raw task steps/s without any protocol (make_task + step loop) for basic and
         ball3d, and ball3d through the protocol, to express protocol overhead as a percentage of
         ball3d physics time per decision (decision_period physics steps).
@@ -225,8 +225,6 @@ def run(args) -> dict:
         mlagents = bench_mlagents_envs("basic", areas, args.warmup, args.exchanges)
         if mlagents is not None:
             rows[f"mlagents_envs basic x{areas}"] = mlagents
-        rows[f"mlagents_like_envs basic x{areas}"] = bench_mlagents_envs(
-            "basic", areas, args.warmup, args.exchanges, package="mlagents_like_envs")
         rows[f"raw basic x{areas}"] = bench_raw_physics("basic", areas, args.exchanges)
     for ball_areas in args.ball3d_areas:
         rows[f"ours ball3d x{ball_areas * 12}"] = bench_endpoint("ball3d", ball_areas, args.warmup, args.exchanges)
@@ -236,12 +234,6 @@ def run(args) -> dict:
         record["agent_steps_per_s"] = rate(record, "agent_steps")
     report["ratios"] = {
         f"x{a}": rows[f"ours basic x{a}"]["exchanges_per_s"] / rows[f"mlagents_envs basic x{a}"]["exchanges_per_s"]
-        for a in args.areas if f"mlagents_envs basic x{a}" in rows
-    }
-    # the same user loop (get_steps, random_action, set_actions, step) under each package
-    report["envs_api_ratios"] = {
-        f"x{a}": rows[f"mlagents_like_envs basic x{a}"]["exchanges_per_s"]
-        / rows[f"mlagents_envs basic x{a}"]["exchanges_per_s"]
         for a in args.areas if f"mlagents_envs basic x{a}" in rows
     }
     report["ball3d"] = {}
@@ -278,8 +270,6 @@ def markdown(report: dict) -> str:
     for key, ratio in report["ratios"].items():
         verdict = "meets" if ratio >= 5 else "MISSES"
         lines.append(f"* ours / mlagents_envs, basic {key}: **{ratio:.2f}x** ({verdict} the >= 5x target)")
-    for key, ratio in report["envs_api_ratios"].items():
-        lines.append(f"* mlagents_like_envs / mlagents_envs UnityEnvironment, same loop, basic {key}: **{ratio:.2f}x**")
     for key, ball in report["ball3d"].items():
         verdict = "meets" if ball["overhead_percent"] <= 15 else "MISSES"
         lines.append(

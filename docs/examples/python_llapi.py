@@ -1,5 +1,5 @@
 """The code of ML-Agents' "Python Low Level API" page (docs/Python-LLAPI.md of Release 22), ported
-to mlagents_like_envs by changing only its imports.
+to this project's package by changing only its imports.
 
 The page's three snippets, in order, each completed where the page writes "...":
 

@@ -3,11 +3,13 @@ with its imports turned back into ``mlagents_envs`` under the real ML-Agents 1.1
 same summary (same spec, same episode rewards for the same seeds and random actions).
 
 The page's code uses fixed ports: 5005 for the build (worker 0) and 5004 for the Editor, which the
-stub plays here by connecting to 5004 (twice: the page opens the Editor twice)."""
+stub plays by connecting to 5004 (twice: the page opens the Editor twice). Each run gets a network
+namespace of its own (``unshare -rn``) where the machine allows it, so other programs holding
+those ports do not matter; otherwise it runs on the machine's ports if they are free."""
 from __future__ import annotations
 
 import json
-import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -15,7 +17,6 @@ import sys
 import pytest
 
 from tests.interop.conftest import INTEROP_PYTHON, REPO, write_stub_executable
-from tests.stub.conftest import start_stub
 
 EXAMPLE = REPO / "docs" / "examples" / "python_llapi.py"
 
@@ -29,39 +30,43 @@ def port_taken(port: int) -> bool:
     return False
 
 
-def run_example(python: str, script, cwd, env) -> dict:
-    """The example in ``cwd`` (which holds ``3DBall``), with the stub pressing Play twice."""
-    example = subprocess.Popen([python, str(script)], cwd=cwd, env=env, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+def own_network() -> list[str] | None:
+    """The prefix that runs a command in a new network namespace with loopback up, or None."""
+    if not (shutil.which("unshare") and shutil.which("ip")):
+        return None
+    prefix = ["unshare", "-rn", "sh", "-c", 'ip link set lo up && exec "$@"', "sh"]
     try:
-        for _ in range(2):  # the Editor of snippets 2 and 3: it retries until the example listens
-            editor = start_stub(5004, "basic", "--connect-timeout", "120")
-            out, err = editor.communicate(timeout=180)
-            assert editor.returncode == 0, err[-2000:]
-        out, err = example.communicate(timeout=180)
-    finally:
-        if example.poll() is None:
-            example.kill()
-            example.communicate()
-    assert example.returncode == 0, err[-3000:]
-    return json.loads(out.strip().splitlines()[-1])
+        ok = subprocess.run(prefix + ["true"], capture_output=True, timeout=10).returncode == 0
+    except (OSError, subprocess.TimeoutExpired):
+        ok = False
+    return prefix if ok else None
 
 
-@pytest.mark.may_skip_in_ci  # another program may hold port 5004 or 5005 on any machine
+def run_example(prefix: list[str], python: str, script, folder) -> dict:
+    done = subprocess.run(prefix + [sys.executable, "-m", "tests.interop.llapi_session", python, str(script),
+                                    str(folder)], cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.may_skip_in_ci  # without network namespaces, another program may hold port 5004 or 5005
 def test_the_python_llapi_page_ported_by_its_imports(tmp_path, interop_python):
-    if port_taken(5004) or port_taken(5005):
-        pytest.skip("port 5004 (the Editor's) or 5005 (worker 0's) is taken on this machine")
+    prefix = own_network()
+    if prefix is None:
+        prefix = []
+        if port_taken(5004) or port_taken(5005):
+            pytest.skip("no network namespace (unshare -rn), and port 5004 (the Editor's) or 5005 "
+                        "(worker 0's) is taken on this machine")
     build = write_stub_executable(tmp_path, "ball3d")
     build.rename(tmp_path / "3DBall.x86_64")
-    ours = run_example(sys.executable, EXAMPLE, tmp_path, dict(os.environ, PYTHONPATH=str(REPO)))
+    ours = run_example(prefix, sys.executable, EXAMPLE, tmp_path)
 
     source = EXAMPLE.read_text()
     import_lines = [line for line in source.splitlines() if "mlagents_like_envs" in line]
     assert import_lines and all(line.startswith("from mlagents_like_envs.") for line in import_lines)
     theirs_script = tmp_path / "python_llapi_mlagents_envs.py"
     theirs_script.write_text(source.replace("from mlagents_like_envs.", "from mlagents_envs."))
-    peer_env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    theirs = run_example(str(INTEROP_PYTHON), theirs_script, tmp_path, peer_env)
+    theirs = run_example(prefix, str(INTEROP_PYTHON), theirs_script, tmp_path)
 
     assert ours == theirs
     assert ours["behavior"] == "3DBall?team=0" and ours["observation_shapes"] == [[8]]
