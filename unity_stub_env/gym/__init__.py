@@ -11,9 +11,9 @@
     pz = unity_stub_env.gym.parallel_env("pushblock")            # PettingZoo ParallelEnv
 
 Ids of tasks whose agents play together (PushBlock, Dungeon, Soccer, SoccerTwos) have no
-single-agent form: ``gym.make_vec`` and ``parallel_env`` serve them. docs/python-api.md lists the
-ids with their spaces. Needs the ``gym`` extra (gymnasium, pettingzoo); the rest of the stub
-does not.
+single-agent form: ``gym.make_vec`` and ``parallel_env`` serve them. docs/python-api.md, "The
+stub's tasks in-process", lists the ids with their spaces. Needs the ``gym`` extra (gymnasium,
+pettingzoo); the rest of the stub does not.
 """
 from __future__ import annotations
 
