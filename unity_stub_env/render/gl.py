@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 
 from unity_stub_env.render import RenderError
 
@@ -32,7 +33,9 @@ def open_renderer(model, width: int, height: int):
     model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
     model.vis.global_.offheight = max(int(model.vis.global_.offheight), height)
     try:
-        return mujoco.Renderer(model, height, width)
+        with warnings.catch_warnings():  # GLFW warns before it fails: the one message below says it all
+            warnings.simplefilter("ignore")
+            return mujoco.Renderer(model, height, width)
     except Exception as error:  # FatalError, ImportError, AttributeError: each backend fails its own way
         backend = os.environ.get("MUJOCO_GL", "(unset: GLFW)")
         raise RenderError(f"MuJoCo cannot render: no usable OpenGL with MUJOCO_GL={backend} "

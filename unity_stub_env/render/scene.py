@@ -38,6 +38,24 @@ class Shot:
     elevation: float = -15.0
     azimuth: float = 90.0
     follow: bool = True
+    span: Callable | None = None  # span(task, k): the distance instead, when what to frame moves apart
+
+
+def _dodge_chest(task, k):
+    return task.base[k] + (0.0, 0.0, 1.1)
+
+
+def _dodge_ball(task, k):
+    return task.data.geom_xpos[task.ball_geom[k]]
+
+
+def _dodge_focus(task, k):
+    """Between the character and its sphere: both stay in the picture from the throw on."""
+    return 0.5 * (_dodge_chest(task, k) + _dodge_ball(task, k))
+
+
+def _dodge_span(task, k):
+    return 3.0 + 1.3 * min(float(np.linalg.norm(_dodge_ball(task, k) - _dodge_chest(task, k))), 8.0)
 
 
 def _body(name_of: Callable[[object, int], str]) -> Callable:
@@ -54,8 +72,7 @@ def _area_centre(spacing_origin: Callable[[object, int], Vec]) -> Callable:
 
 SHOTS: dict[str, Shot] = {
     "ball3d": Shot(_body(lambda t, k: f"plate{k}"), _at_body, 11.0, -25.0),
-    "dodge": Shot(lambda t, k: int(t.pelvis_body[k]), lambda t, k: t.base[k] + (0.0, 0.0, 1.0), 6.0, -12.0, 35.0,
-                  follow=False),
+    "dodge": Shot(lambda t, k: int(t.pelvis_body[k]), _dodge_focus, 6.0, -12.0, 35.0, span=_dodge_span),
     "mimic": Shot(lambda t, k: int(t.pelvis[k]), lambda t, k: t.data.xpos[t.pelvis[k]] * (1, 1, 0) + (0, 0, 0.9),
                   4.5, -12.0, 20.0),
     "creature": Shot(lambda t, k: int(t.root[k]), _at_body, 5.0, -22.0, 60.0),
@@ -154,6 +171,8 @@ class MujocoView:
         self.camera.distance, self.camera.elevation = self.shot.distance, self.shot.elevation
         self.camera.azimuth = self.shot.azimuth
         self.camera.lookat[:] = self.shot.focus(task, agent)
+        if self.shot.span is not None:
+            self.camera.distance = self.shot.span(task, agent)
         self.state: dict = {}
 
     def frame(self) -> np.ndarray:
@@ -161,6 +180,8 @@ class MujocoView:
         task = self.task
         if self.shot.follow:  # ease towards the agent: a walk's sway does not shake the picture
             self.camera.lookat[:] += 0.5 * (self.shot.focus(task, self.agent) - self.camera.lookat)
+        if self.shot.span is not None:
+            self.camera.distance += 0.5 * (self.shot.span(task, self.agent) - self.camera.distance)
         self.renderer.update_scene(task.data, self.camera)
         if task.name == "ball3d":  # the plates float: a floor under them gives the picture depth
             add_geom(self.renderer.scene, mujoco.mjtGeom.mjGEOM_PLANE, (40, 40, 1), (0, 0, 0), rgba=FLOOR)

@@ -24,8 +24,14 @@ def check_output(path: str) -> str:
     folder = Path(path).parent
     if not folder.is_dir():
         raise RenderError(f"--video {path!r}: the folder {str(folder)!r} does not exist; create it first")
-    if not os.access(folder, os.W_OK) or (Path(path).exists() and not os.access(path, os.W_OK)):
-        raise RenderError(f"--video {path!r}: cannot write there (permission denied); choose another file")
+    probe = folder / f".{Path(path).name}.probe"
+    try:  # a real write: permissions, read-only mounts and pseudo file systems all answer it
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as error:
+        raise RenderError(f"--video {path!r}: cannot write there ({error.strerror}); choose another file") from None
+    if Path(path).is_dir():
+        raise RenderError(f"--video {path!r} is a folder; give a file name ending in .mp4 or .gif")
     return suffix
 
 
