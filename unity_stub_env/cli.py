@@ -6,7 +6,7 @@
     unity-stub-env --task mirror --spec behaviors.json --mlagents-port P    (or --task mirror=FILE)
     unity-stub-env --list
     unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random|scripted [--episodes N] [--seed S] [--json F]
-                   [--evaluate-option KEY=VALUE]
+                   [--evaluate-option KEY=VALUE] [--video DIR]  (one clip per scripted case)
     unity-stub-env --task T --play MODEL.onnx|zero|random|scripted --video FILE.mp4|FILE.gif [--seconds S |
                    --episodes N] [--width W --height H --fps F --seed S --env-param K=V --agent K --stochastic]
     unity-stub-env --task basic|ball3d|... --record-demo OUT.demo --policy MODEL.onnx|scripted
@@ -201,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
         from unity_stub_env.evaluate import run as run_evaluation
 
         return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path,
-                              args.evaluate_options)
+                              args.evaluate_options, args.video)
     if args.record_demo is not None:
         if len(args.tasks) != 1 or args.mirror is not None or args.policy is None:
             print("unity-stub-env: --record-demo takes exactly one --task and --policy MODEL.onnx|scripted.",

@@ -20,7 +20,7 @@ FILMED = ("ball3d", "dodge", "mimic", "creature", "pushblock", "dungeon", "socce
 
 def player(task_name: str, policy: str = "zero", agent: int = 0, seed: int = 0, width: int = W, height: int = H):
     task = make_task(task_name, num_areas=1, seed=seed)
-    return Player(task, make_policy(policy, task, seed), agent, width, height, task_name)
+    return Player(task, make_policy(policy, task, seed), agent, width, height, task_name, samples=0)
 
 
 def segmentation(view) -> np.ndarray:
@@ -56,7 +56,8 @@ def test_dodge_crouch_changes_the_picture_where_the_body_is():
         task = make_task("dodge", num_areas=1, seed=3)
         action = np.zeros((task.num_agents, 9), np.float32)
         action[:, 0] = crouch
-        p = Player(task, lambda obs, mask, a=action: (a, np.zeros((len(a), 0), np.int32)), 0, 320, 240, "dodge")
+        p = Player(task, lambda obs, mask, a=action: (a, np.zeros((len(a), 0), np.int32)), 0, 320, 240, "dodge",
+                   samples=0)
         for _ in range(20):
             p.step()
         frames.append(p.view.frame().astype(int))
@@ -165,3 +166,21 @@ def test_bad_input_exits_2(tmp_path, args, words):
     run = _cli("--task", "dodge", *[a.format(tmp=tmp_path) for a in args], "--seconds", "0.1")
     assert run.returncode == 2, run.stdout
     assert words in run.stderr and "Traceback" not in run.stderr
+
+
+def test_evaluate_video_films_each_scripted_dodge_throw(tmp_path):
+    """One clip per scripted throw, named by number, start side and mark; each shows its throw
+    from launch to the end of the episode (a hit or a pass within ~1.5 s)."""
+    av = pytest.importorskip("av")
+    from unity_stub_env.evaluate import load_policy
+    from unity_stub_env.render.evaluate_clips import write
+    from unity_stub_env.tasks.dodge import SCRIPTED_THROWS
+
+    clips = write("dodge", {"zero": load_policy("zero", 17, 9, 0)}, 0, str(tmp_path / "clips"), {}, (96, 72), samples=0)
+    names = [os.path.basename(c) for c in clips]
+    assert len(names) == 17 == len(SCRIPTED_THROWS)
+    assert names[0] == "dodge-zero-01-front-left_shoulder.mp4" and names[7] == "dodge-zero-08-right-head.mp4"
+    assert sorted(os.listdir(tmp_path / "clips")) == sorted(names)
+    with av.open(clips[1]) as container:
+        frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+    assert 10 <= len(frames) <= 60 and frames[0].shape == (72, 96, 3)

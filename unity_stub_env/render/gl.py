@@ -38,6 +38,18 @@ def open_renderer(model, width: int, height: int):
             return mujoco.Renderer(model, height, width)
     except Exception as error:  # FatalError, ImportError, AttributeError: each backend fails its own way
         backend = os.environ.get("MUJOCO_GL", "(unset: GLFW)")
+        if backend != _backend_at_import():
+            backend += (f", but mujoco was imported before it was set and uses "
+                        f"{_backend_at_import() or '(unset: GLFW)'}: set MUJOCO_GL before importing mujoco")
         raise RenderError(f"MuJoCo cannot render: no usable OpenGL with MUJOCO_GL={backend} "
                           f"({type(error).__name__}: {str(error).strip().splitlines()[-1] if str(error).strip() else ''}). "
                           f"{INSTALL_HINT}") from None
+
+
+def _backend_at_import() -> str:
+    """The MUJOCO_GL value MuJoCo chose its backend by (it reads it once, at import)."""
+    try:
+        from mujoco.rendering.classic import gl_context
+    except ImportError:
+        return os.environ.get("MUJOCO_GL", "")
+    return getattr(gl_context, "_MUJOCO_GL", os.environ.get("MUJOCO_GL", ""))

@@ -69,7 +69,7 @@ def make_policy(policy: str, task, seed: int, stochastic: bool = False) -> Calla
         raise RenderError(str(error).replace("--policy", "--play")) from None
 
 
-def make_view(task, agent: int, width: int, height: int):
+def make_view(task, agent: int, width: int, height: int, samples: int = 4):
     if task.name == "runner":
         from unity_stub_env.render.runner_view import RunnerView
 
@@ -79,7 +79,7 @@ def make_view(task, agent: int, width: int, height: int):
     if task.name not in SHOTS:
         raise RenderError(f"task {task.name!r} has no scene to film; tasks with one: "
                           f"{', '.join(sorted([*SHOTS, 'runner']))}")
-    return MujocoView(task, agent, width, height)
+    return MujocoView(task, agent, width, height, samples)
 
 
 def _control_dt(task) -> float | None:
@@ -95,11 +95,12 @@ def _control_dt(task) -> float | None:
 class Player:
     """Steps a task with a policy and hands out captioned frames of one agent."""
 
-    def __init__(self, task, act: Callable, agent: int, width: int, height: int, label: str) -> None:
+    def __init__(self, task, act: Callable, agent: int, width: int, height: int, label: str,
+                 samples: int = 4) -> None:
         if not 0 <= agent < task.num_agents:
             raise RenderError(f"--agent {agent}: task {task.name!r} has agents 0..{task.num_agents - 1} in one area")
         self.task, self.act, self.agent, self.label = task, act, agent, label
-        self.view = make_view(task, agent, width, height)
+        self.view = make_view(task, agent, width, height, samples)
         spec = task.action_spec
         self.continuous = np.zeros((task.num_agents, spec.continuous_size), np.float32)
         self.discrete = np.zeros((task.num_agents, len(spec.discrete_branches)), np.int32)

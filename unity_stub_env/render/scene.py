@@ -158,13 +158,16 @@ CUES: dict[str, Callable] = {"dodge": _dodge_cues, "mimic": _mimic_cues, "creatu
 class MujocoView:
     """Frames of ``task`` (a MuJoCo task) seen by a camera on agent ``agent``."""
 
-    def __init__(self, task, agent: int, width: int, height: int) -> None:
+    def __init__(self, task, agent: int, width: int, height: int, samples: int = 4) -> None:
+        """samples: multisampling (antialiasing) of the offscreen buffer; 0 draws ~3x faster on a CPU
+        (llvmpipe: 29 vs 75 ms a 640x480 dodge frame, bench/render.py)."""
         if task.name not in SHOTS:
             raise KeyError(task.name)
         self.task, self.agent, self.shot = task, agent, SHOTS[task.name]
         _paint(task)
         task.model.vis.headlight.ambient[:] = 0.45
         task.model.vis.headlight.diffuse[:] = 0.55
+        task.model.vis.quality.offsamples = samples
         self.renderer = open_renderer(task.model, width, height)
         self.camera = mujoco.MjvCamera()
         self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
