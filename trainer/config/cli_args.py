@@ -97,6 +97,9 @@ def _add_general_flags(parser: argparse.ArgumentParser) -> None:
     add("--torch", action=_Removed, help="(removed) does nothing")
     add("--tensorflow", action=_Removed, help="(removed) does nothing")
     add("--results-dir", default="results", action=_Store, help="base folder of all runs")
+    add("--record-video", action=_StoreTrue,
+        help="--env stub:TASK: after each checkpoint, a background process films its ONNX to "
+             "<Behavior>-<step>.mp4 beside it and into TensorBoard (Images)")
     add("--timeout-wait", type=int, default=60, action=_Store, help="seconds to wait for each simulator message")
     add("--bind", default="127.0.0.1", action=_Store,
         help="address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")

@@ -172,8 +172,10 @@ def film(player: Player, writer, fps: float, seconds: float | None = None, episo
 
 def play(task_name: str, policy: str, video: str, seconds: float | None = None, episodes: int | None = None,
          width: int = 640, height: int = 480, fps: float = 30.0, seed: int = 0, env_params: list[str] | None = None,
-         agent: int = 0, stochastic: bool = False) -> PlayResult:
-    """Film ``policy`` playing ``task_name`` to ``video``; RenderError for anything unusable."""
+         agent: int = 0, stochastic: bool = False, tensorboard: tuple[str, str, int] | None = None,
+         samples: int = 4) -> PlayResult:
+    """Film ``policy`` playing ``task_name`` to ``video``; RenderError for anything unusable.
+    ``tensorboard`` (folder, tag, step): also write the clip as an animated image summary there."""
     from unity_stub_env.record_demo import RecordError, parse_env_params
     from unity_stub_env.tasks import make_task
 
@@ -195,13 +197,23 @@ def play(task_name: str, policy: str, video: str, seconds: float | None = None, 
         raise RenderError(str(error)) from None
     act = make_policy(policy, task, seed, stochastic)
     label = f"{task_name} / {Path(policy).stem if policy.endswith('.onnx') else policy}"
-    player = Player(task, act, agent, width, height, label)
+    player = Player(task, act, agent, width, height, label, samples)
     writer = VideoWriter(video, fps)
+    gif = None
+    if tensorboard is not None:
+        from unity_stub_env.render.tensorboard_clip import GifFrames
+
+        gif = GifFrames()
     try:
-        return film(player, writer, fps, seconds, episodes)
+        result = film(player, writer, fps, seconds, episodes, on_frame=gif)
     finally:
         writer.close()
         player.close()
+    if tensorboard is not None:
+        from unity_stub_env.render.tensorboard_clip import write_clip_summary
+
+        write_clip_summary(*tensorboard, gif.frames, fps)
+    return result
 
 
 def run(args) -> int:
@@ -209,8 +221,11 @@ def run(args) -> int:
     import sys
 
     try:
+        tensorboard = None if args.tensorboard is None else (args.tensorboard, args.tensorboard_tag,
+                                                             args.tensorboard_step)
         result = play(args.tasks[0], args.play, args.video, args.seconds, args.episodes, args.width, args.height,
-                      args.fps, args.seed or 0, args.env_params, args.agent, args.stochastic)
+                      args.fps, args.seed or 0, args.env_params, args.agent, args.stochastic, tensorboard,
+                      args.antialias)
     except RenderError as error:
         print(f"unity-stub-env: {error}", file=sys.stderr)
         return 2
