@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 # task, policy, environment parameters, seconds into the play, seed
-STILLS = [("dodge", "zero", [], 0.5, 2), ("mimic", "scripted", ["motion=2"], 1.5, 0),
+STILLS = [("dodge", "zero", [], 0.5, 2), ("mimic", "scripted", ["motion=2"], 3.0, 0),
           ("creature", "random", [], 2.0, 0), ("runner", "zero", [], 1.0, 3)]
 
 

@@ -24,8 +24,11 @@ def player(task_name: str, policy: str = "zero", agent: int = 0, seed: int = 0, 
 
 
 def segmentation(view) -> np.ndarray:
-    """int [H, W]: the model geom id drawn at each pixel of the view's last scene (-1: none or a cue)."""
+    """int [H, W]: the model geom id drawn at each pixel, seen by the view's camera (-1: none). The
+    scene is made again without the cues: translucent geoms blend segment colours into ids that
+    do not exist."""
     renderer = view.renderer
+    renderer.update_scene(view.task.data, view.camera)
     renderer.enable_segmentation_rendering()
     try:
         seg = renderer.render()
