@@ -1,7 +1,7 @@
 """``--record-video`` (``--env stub:TASK`` only): after each checkpoint, a clip of its ONNX.
 
 The stub renders it (``unity-stub-env --task TASK --play BEHAVIOR-STEP.onnx --video ...
---tensorboard ...``) in a background process: niced, one at a time (a checkpoint that comes
+--tensorboard ...``) in a background process at nice 19, one at a time (a checkpoint that comes
 while the previous clip is still being made gets none), so training keeps its CPU
 (bench/record_video.py measures the cost). The clip goes next to the model as
 ``<Behavior>-<step>.mp4``; the same frames go into TensorBoard as an animated image under
@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -18,7 +19,12 @@ logger = logging.getLogger(__name__)
 SECONDS = 10.0
 FPS = 20.0
 SIZE = (320, 240)
-NICE = 10
+
+
+def lowest_priority() -> None:
+    """In the clip's process before it starts: nice 19. (Not Linux's SCHED_IDLE: on a saturated
+    machine it starved the clip until keep_checkpoints had deleted its model, or past the run.)"""
+    os.nice(19)
 
 
 class ClipRecorder:
@@ -26,6 +32,7 @@ class ClipRecorder:
         self.task, self.seed = task, seed
         self.process: subprocess.Popen | None = None
         self.log = None
+        self.model: Path | None = None
 
     @staticmethod
     def for_env(env_path: str | None, seed: int) -> "ClipRecorder | None":
@@ -47,22 +54,30 @@ class ClipRecorder:
         self.close_log()
         folder = Path(onnx_path).parent
         video = folder / f"{brain}-{step}.mp4"
-        command = [sys.executable, "-m", "unity_stub_env.cli", "--task", self.task, "--play", onnx_path,
+        # a copy: keep_checkpoints may delete the model before the idle-priority process reads it
+        (folder / "clips").mkdir(exist_ok=True)
+        self.model = folder / "clips" / f".{brain}-{step}.onnx"
+        shutil.copyfile(onnx_path, self.model)
+        command = [sys.executable, "-m", "unity_stub_env.cli", "--task", self.task, "--play", str(self.model),
                    "--video", str(video), "--seconds", f"{SECONDS:g}", "--fps", f"{FPS:g}",
                    "--width", str(SIZE[0]), "--height", str(SIZE[1]), "--antialias", "0", "--seed", str(self.seed),
                    "--tensorboard", str(folder / "clips"), "--tensorboard-tag", f"{brain}/clip",
                    "--tensorboard-step", str(step)]
         self.log = open(folder / "clips.log", "a")
         self.process = subprocess.Popen(command, stdout=self.log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                        preexec_fn=lambda: os.nice(NICE))
+                                        preexec_fn=lowest_priority)
         return True
 
     def close_log(self) -> None:
+        """After a clip: its log closed, its copy of the model gone."""
         if self.log is not None:
             self.log.close()
             self.log = None
+        if self.model is not None:
+            self.model.unlink(missing_ok=True)
+            self.model = None
 
-    def finish(self, timeout: float = 120.0) -> None:
+    def finish(self, timeout: float = 300.0) -> None:
         """At the end of the run: let the last clip finish (its checkpoint is the final model)."""
         if self.process is not None:
             try:
