@@ -70,7 +70,8 @@ def mimic_clips(actors: dict, seed: int, folder: Path, options: dict, size: tupl
     for name, actor in actors.items():
         for case, values in cases:
             params = EnvironmentParameters()
-            for key, value in {"rsi": 0, "residual": options.get("residual", 0.0), **values}.items():
+            rate = {key: options[key] for key in ("decision_hz", "effort_weight") if key in options}  # as evaluated
+            for key, value in {"rsi": 0, "residual": options.get("residual", 0.0), **rate, **values}.items():
                 params.set(key, lambda value=value: float(value))
             task = MimicTask(1, seed, params)
             path = folder / f"mimic-{_slug(name)}-{case}.mp4"
