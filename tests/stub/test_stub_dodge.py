@@ -1,4 +1,5 @@
-"""The ``dodge`` task (seed 000): model, pose, rewards and outcomes against hand-computed numbers."""
+"""The ``dodge`` task (the dodge thesis, docs/stub-tasks.md): model, pose, rewards and outcomes
+against hand-computed numbers."""
 from __future__ import annotations
 
 import math
@@ -8,6 +9,7 @@ import numpy as np
 import pytest
 
 from unity_stub_env.cli import main
+from unity_stub_env.geometry import euler_to_quat
 from unity_stub_env.tasks import TASKS, make_task
 from unity_stub_env.tasks.dodge import (
     CROUCH_RATE,
@@ -19,7 +21,6 @@ from unity_stub_env.tasks.dodge import (
     XML_PATH,
     Throws,
     effort,
-    euler_to_quat,
 )
 
 N = 14

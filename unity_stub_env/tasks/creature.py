@@ -1,4 +1,5 @@
-"""``creature``: a generated creature learns to walk to targets over generated terrain (seed 002).
+"""``creature``: a generated creature learns to walk to targets over generated terrain (the creature
+report: docs/stub-tasks.md, "Seed projects").
 
 One agent per area. Each area is an arena: a 20 m x 20 m heightfield (flat, or Perlin noise whose
 height is set by the roughness), four walls 1 m high, optional box obstacles, and a target; the
@@ -71,6 +72,7 @@ from protos.types import (
 )
 from unity_stub_env.creatures import generate, mjcf
 from unity_stub_env.creatures.skeleton import Skeleton
+from unity_stub_env.geometry import matrix_quat
 from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
 
 KINDS = ("quadruped", "biped", "lsystem")
@@ -177,13 +179,6 @@ def _specs(skeleton: Skeleton) -> tuple[tuple[ObservationSpec, ...], ActionSpec]
             ActionSpec(continuous_size=skeleton.num_hinges(), discrete_branches=()))
 
 
-def _mat_to_quat(matrices: np.ndarray) -> np.ndarray:
-    out = np.empty((len(matrices), 4))
-    for i, m in enumerate(matrices):
-        mujoco.mju_mat2Quat(out[i], m.reshape(9))
-    return np.where(out[:, :1] < 0, -out, out)
-
-
 _DEFAULT_SPECS = _specs(generate(KINDS[0], 0))
 
 
@@ -195,7 +190,7 @@ class CreatureTask(Task):
     max_step = MAX_STEP
     decision_period = 1
     sets_reward = False
-    description = ("Generated creature walking to targets over generated terrain (seed 002). Shapes shown for "
+    description = ("Generated creature walking to targets over generated terrain (docs/stub-tasks.md). Shapes shown for "
                    "the default quadruped (creature_kind 0, creature_seed 0); they follow the creature. "
                    "Reward: Walker's match-speed x look-at-target. Env params: creature_kind, creature_seed, "
                    "terrain_roughness, obstacles, target_speed.")
@@ -363,7 +358,7 @@ class CreatureTask(Task):
         obs[:, 4:6] = 0.0
         rotation = np.stack([forward, left, np.tile([0.0, 0.0, 1.0], (n, 1))], axis=1)  # rows: cube axes
         root = data.xmat[self.root].reshape(n, 3, 3)
-        obs[:, 6:10] = _mat_to_quat(rotation @ root)
+        obs[:, 6:10] = matrix_quat(rotation @ root)
         obs[:, 10:13] = cube(self.target - com)
         obs[:, 13] = com[:, 2] - self.terrain_height(np.arange(n), com[:, :2])
         per_bone = np.concatenate([self.contact[..., None].astype(np.float64), cube(self.velocity),
