@@ -1,8 +1,8 @@
 """``unity-stub-env``: run a stub task as if it were a Unity player built with ML-Agents.
 
     unity-stub-env --task NAME --mlagents-port P [-nographics] [-batchmode] [-logFile F]
-                   [--num-areas N] [--seed S] [--decision-period K] [--connect-timeout T]
-                   [--spin-wait-ms MS] [--transport {http2,grpcio}]
+                   [--num-areas N] [--agents-per-area N] [--seed S] [--decision-period K]
+                   [--connect-timeout T] [--spin-wait-ms MS] [--transport {http2,grpcio}]
     unity-stub-env --task mirror --spec behaviors.json --mlagents-port P    (or --task mirror=FILE)
     unity-stub-env --list
     unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random|scripted [--episodes N] [--seed S] [--json F]
@@ -55,6 +55,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--mlagents-port", type=int, default=None,
                         help="port of the trainer's gRPC server (a Unity player does not train without it)")
     parser.add_argument("--num-areas", type=int, default=None, help="override the trainer's num_areas")
+    parser.add_argument("--agents-per-area", type=int, default=None, metavar="N",
+                        help="agents in one area, for tasks whose agents are independent copies (ball3d, "
+                             "dodge, ...): 1 makes a one-agent scene, as single-agent wrappers such as "
+                             "UnityToGymWrapper need (default: the task's)")
     parser.add_argument("--seed", type=int, default=None, help="override the trainer's seed")
     parser.add_argument("--decision-period", type=int, default=None,
                         help="control steps between decisions (default: the task's)")
@@ -164,6 +168,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unity-stub-env: each --task may appear once (got {', '.join(args.tasks)}): two copies "
               "would share one behavior name; use --num-areas for more agents.", file=sys.stderr)
         return 2
+    if args.agents_per_area is not None:
+        fixed = [name for name in args.tasks if name == MIRROR_TASK or TASKS[name].agents_interact]
+        if fixed or args.agents_per_area < 1:
+            print(f"unity-stub-env: --agents-per-area must be 1 or more and applies to tasks whose agents are "
+                  f"independent; {', '.join(fixed) or args.agents_per_area} cannot take it (use --num-areas).",
+                  file=sys.stderr)
+            return 2
     if not args.spin_wait_ms >= 0:
         print(f"unity-stub-env: --spin-wait-ms must be 0 or more, got {args.spin_wait_ms:g}.", file=sys.stderr)
         return 2
@@ -186,8 +197,9 @@ def main(argv: list[str] | None = None) -> int:
                              args.num_areas, args.env_params, args.demo_noise)
     if args.write_launcher is not None:
         spec = ["--spec", os.path.abspath(args.spec)] if args.mirror is not None else []
+        agents = ["--agents-per-area", str(args.agents_per_area)] if args.agents_per_area is not None else []
         path = write_player_launcher(args.write_launcher, args.tasks, extra_args=spin_wait_args(
-            args.spin_wait_ms / 1e3) + transport_args(args.transport) + spec)
+            args.spin_wait_ms / 1e3) + transport_args(args.transport) + spec + agents)
         print(f"{path}  (use --env {path.with_suffix('')})")
         return 0
     if args.mlagents_port is None:
@@ -251,7 +263,8 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
 
             tasks += mirror_tasks(args.mirror, num_areas, seed + index, env_params)
         else:
-            tasks.append(make_task(name, num_areas=num_areas, seed=seed + index, env_params=env_params))
+            tasks.append(make_task(name, num_areas=num_areas, seed=seed + index, env_params=env_params,
+                                   agents_per_area=args.agents_per_area))
     for task in tasks:
         academy = Academy(task, args.decision_period, counter)  # construction is the first RESET
         brains = {key: build_brain_parameters(key, task.action_spec) for key, _ in academy.behaviors}
