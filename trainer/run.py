@@ -30,6 +30,7 @@ from protos.types import ActionTuple, DecisionSteps, StatsAggregationMethod, Ste
 from trainer import crash_points
 from trainer.artifacts.atomic import WRITE_ERRNOS, results_write_error
 from trainer.artifacts.behaviors import BehaviorRecorder
+from trainer.artifacts.clips import ClipRecorder
 from trainer.artifacts.console import ConsoleWriter, ProgressLine
 from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, PROPERTY_SELF_PLAY, GaugeWriter, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
@@ -101,6 +102,7 @@ class RunState:
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
     pending_reset: bool = False
     teams: TeamController = field(default_factory=TeamController)  # self-play's learning team
+    clips: ClipRecorder | None = None  # --record-video (trainer/artifacts/clips.py)
     start_time: float = field(default_factory=time.time)
     _last_progress: float = float("-inf")
 
@@ -143,6 +145,8 @@ class RunState:
             # what a run killed without warning wrote after its last checkpoint is void
             self.reporter.resume_from(brain, runner.next_summary - 1)
         self.runners[brain] = runner
+        if self.clips is not None and runner.training:
+            runner.on_checkpoint = self.clips.after_checkpoint
         self.reporter.add_property(brain, PROPERTY_HYPERPARAMETERS, settings_as_dict(settings))
         if runner.self_play is not None:
             self.reporter.add_property(brain, PROPERTY_SELF_PLAY, True)
@@ -418,6 +422,8 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
     reporter = StatsReporter(writers)
     state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
                      make_routers(env.num_envs), env_vars, behavior_recorder(options))
+    if ck.record_video and main:
+        state.clips = ClipRecorder.for_env(env.env_path, env.seed)
     for line in params.describe():
         logger.info(line)
     stopped = write_failed = False
@@ -495,6 +501,8 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         finally:
             pool.close()
             state.ranks.close()
+            if state.clips is not None:
+                state.clips.finish()
     if stopped and not ck.inference and not state.finished:
         logger.info("Stopped before max_steps (exit status %d); continue this run with --resume.", EXIT_STOPPED)
         return EXIT_STOPPED

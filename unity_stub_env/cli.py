@@ -6,7 +6,9 @@
     unity-stub-env --task mirror --spec behaviors.json --mlagents-port P    (or --task mirror=FILE)
     unity-stub-env --list
     unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random|scripted [--episodes N] [--seed S] [--json F]
-                   [--evaluate-option KEY=VALUE]
+                   [--evaluate-option KEY=VALUE] [--video DIR]  (one clip per scripted case)
+    unity-stub-env --task T --play MODEL.onnx|zero|random|scripted --video FILE.mp4|FILE.gif [--seconds S |
+                   --episodes N] [--width W --height H --fps F --seed S --env-param K=V --agent K --stochastic]
     unity-stub-env --task basic|ball3d|... --record-demo OUT.demo --policy MODEL.onnx|scripted
                    [--demo-steps N] [--seed S] [--num-areas N] [--env-param KEY=NUMBER] [--demo-noise S]  (see unity_stub_env.record_demo)
     unity-stub-env hmm train CORPUS -o MODEL [--states N --restarts R --method fast|baum-welch --seed S]
@@ -17,7 +19,8 @@ Unity flags the stub does not know are ignored, as a player ignores them. Exit c
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
 --connect-timeout, an incompatible trainer or a protocol error; 2 bad command line.
 
-The stub reads no environment variable: mlagents-like-learn passes its choices as flags.
+The stub reads no environment variable of its own (mlagents-like-learn passes its choices as flags);
+MuJoCo's renderer reads MUJOCO_GL (unity_stub_env.render.gl).
 """
 from __future__ import annotations
 
@@ -78,12 +81,35 @@ def build_parser() -> argparse.ArgumentParser:
                              "expert); repeatable")
     parser.add_argument("--episodes", type=int, default=None,
                         help="--evaluate: dodge: random throws after the scripted ones (default 500); "
-                             "mimic: trials per motion and push (default 32)")
+                             "mimic: trials per motion and push (default 32); --play: film until the "
+                             "followed agent has finished N episodes")
     parser.add_argument("--json", dest="json_path", default=None, metavar="FILE",
                         help="--evaluate: also write the results as JSON to FILE")
     parser.add_argument("--evaluate-option", dest="evaluate_options", action="append", default=[],
                         metavar="KEY=VALUE", help="--evaluate: a task option for every policy, e.g. mimic's "
                                                   "residual=0.25 for a policy trained with that residual; repeatable")
+    parser.add_argument("--play", metavar="POLICY", default=None,
+                        help="play --task in-process (no trainer) with POLICY: a trained .onnx (deterministic "
+                             "actions unless --stochastic), 'zero', 'random' or 'scripted' (basic, ball3d, mimic), "
+                             "and film it to --video FILE (unity_stub_env.render.play)")
+    parser.add_argument("--video", metavar="FILE|DIR", default=None,
+                        help="--play: the clip to write, .mp4 (H.264) or .gif by its extension; "
+                             "--evaluate: a folder for one clip per scripted case")
+    parser.add_argument("--seconds", type=float, default=None,
+                        help="--play: simulated seconds to film (default 10, or until --episodes)")
+    parser.add_argument("--width", type=int, default=640, help="--play: frame width in pixels (default 640)")
+    parser.add_argument("--height", type=int, default=480, help="--play: frame height in pixels (default 480)")
+    parser.add_argument("--fps", type=float, default=30.0, help="--play: frames per simulated second (default 30)")
+    parser.add_argument("--agent", type=int, default=0, metavar="K",
+                        help="--play: the agent of the area the camera follows (default 0)")
+    parser.add_argument("--stochastic", action="store_true",
+                        help="--play MODEL.onnx: sample the actions instead of taking the deterministic ones")
+    parser.add_argument("--antialias", type=int, default=4, metavar="SAMPLES",
+                        help="--play: multisampling of MuJoCo's renderer (default 4; 0 draws ~3x faster on a CPU)")
+    parser.add_argument("--tensorboard", metavar="DIR", default=None,
+                        help="--play: also write the clip to DIR as a TensorBoard animated image (GIF) summary")
+    parser.add_argument("--tensorboard-tag", default="clip", help="--tensorboard: the image's tag (default clip)")
+    parser.add_argument("--tensorboard-step", type=int, default=0, help="--tensorboard: the summary's step")
     parser.add_argument("--record-demo", metavar="OUT.demo", default=None,
                         help="record a demonstration of --task in Unity's .demo format (no trainer) with "
                              "--policy, for behavioral_cloning and GAIL")
@@ -91,8 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="--record-demo: a trained .onnx (deterministic actions) or 'scripted' (the "
                              "task's hand-written expert: basic, ball3d, mimic)")
     parser.add_argument("--env-param", dest="env_params", action="append", default=[], metavar="KEY=NUMBER",
-                        help="--record-demo: an environment parameter the task reads, e.g. mimic's motion=2; "
-                             "repeatable")
+                        help="--record-demo, --play: an environment parameter the task reads, e.g. mimic's "
+                             "motion=2; repeatable")
     parser.add_argument("--demo-noise", type=float, default=0.0, metavar="SIGMA",
                         help="--record-demo: act with Gaussian noise of std SIGMA on the continuous actions "
                              "while recording the policy's own (DART; default 0)")
@@ -178,6 +204,13 @@ def main(argv: list[str] | None = None) -> int:
     if not args.spin_wait_ms >= 0:
         print(f"unity-stub-env: --spin-wait-ms must be 0 or more, got {args.spin_wait_ms:g}.", file=sys.stderr)
         return 2
+    if args.play is not None:
+        if len(args.tasks) != 1 or args.mirror is not None or args.video is None:
+            print("unity-stub-env: --play takes exactly one --task and --video FILE.mp4|FILE.gif.", file=sys.stderr)
+            return 2
+        from unity_stub_env.render.play import run as run_play
+
+        return run_play(args)
     if args.evaluate:
         if len(args.tasks) != 1 or args.mirror is not None:
             print("unity-stub-env: --evaluate takes exactly one --task.", file=sys.stderr)
@@ -185,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
         from unity_stub_env.evaluate import run as run_evaluation
 
         return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path,
-                              args.evaluate_options)
+                              args.evaluate_options, args.video)
     if args.record_demo is not None:
         if len(args.tasks) != 1 or args.mirror is not None or args.policy is None:
             print("unity-stub-env: --record-demo takes exactly one --task and --policy MODEL.onnx|scripted.",
