@@ -39,7 +39,7 @@ from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
 from trainer.config.support import goal_conditioning_note
 from trainer.curriculum import EnvironmentParameterManager
-from trainer.distributed import RankLost, Ranks
+from trainer.distributed import RankLost, Ranks, check_split
 from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
 from trainer.errors import ConfigError, ResultsWriteError, UnityCommunicatorStoppedError, UserError
 from trainer.protocol.codec import NON_FINITE_STAT
@@ -207,7 +207,8 @@ class RunState:
             logger.warning("%s: %s", brain, note)
         ck = opts.checkpoint_settings
         seed = opts.env_settings.seed + len(self.runners)
-        runner = BehaviorRunner.create(brain, spec, settings, self.run_dir, seed,
+        # with data-parallel ranks, this rank's share of buffer_size and batch_size (trainer/distributed.py)
+        runner = BehaviorRunner.create(brain, spec, self.ranks.settings_for(settings, brain), self.run_dir, seed,
                                        opts.torch_settings.device or "cpu", training=not ck.inference,
                                        use_numpy_update=self.env_vars.numpy_update, teams=self.teams)
         if not self.ranks.is_main:
@@ -515,6 +516,7 @@ def pool_settings_of(options, env_vars: EnvVars) -> PoolSettings:
     if world > 1 and any(s is not None and s.self_play is not None for s in configured):
         raise UserError(f"{world} data-parallel ranks cannot share one self-play schedule; run a config with "
                         "self_play as one rank (srun -n 1, or without torchrun).")
+    check_split(options, world)
     return PoolSettings(
         env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
         num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,
@@ -615,7 +617,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         # while the simulators boot: import torch and the networks (seconds, on a small machine)
         configure_torch_threads(env_vars.torch_threads)
         check_torch_device(options.torch_settings.device)
-        state.ranks = Ranks.start(env_vars, options.torch_settings.device)
+        state.ranks = Ranks.start(env_vars, options.torch_settings.device, options.batch_per_rank)
         import trainer.behavior  # noqa: F401
         STOP.check()
         pool.connect()

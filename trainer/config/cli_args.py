@@ -100,6 +100,9 @@ def _add_general_flags(parser: argparse.ArgumentParser) -> None:
     add("--timeout-wait", type=int, default=60, action=_Store, help="seconds to wait for each simulator message")
     add("--bind", default="127.0.0.1", action=_Store,
         help="address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")
+    add("--batch-per-rank", action=_StoreTrue,
+        help="data-parallel ranks: buffer_size and batch_size are each rank's, not the sum over the "
+             "ranks (the default; docs/cluster.md)")
     mirror = parser.add_argument_group(title="Behavior specs (docs/mirror.md)")
     mirror.add_argument("--capture-spec", metavar="FILE", default=None, action=_Store,
                         help="connect to --env, record its behavior specs to FILE after the first steps "
@@ -195,6 +198,7 @@ def parse_run_options(argv: Sequence[str]) -> RunOptions:
     options = dataclasses.replace(options, checkpoint_settings=checkpoint, env_settings=env,
                                   check=values["check"], spec_path=values["spec_path"],
                                   capture_spec=values["capture_spec"],
-                                  max_steps_override=values["max_steps_override"])
+                                  max_steps_override=values["max_steps_override"],
+                                  batch_per_rank=values["batch_per_rank"])
     check_run_options(options)
     return options

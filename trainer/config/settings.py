@@ -271,6 +271,9 @@ class RunOptions:
     #: --max-steps N: every behavior stops at N steps and summarizes at least every N / 10 (a short
     #: CI run of a project's YAML, docs/mirror.md); configuration.yaml keeps the YAML's values
     max_steps_override: int | None = None
+    #: --batch-per-rank: with K data-parallel ranks, buffer_size and batch_size count ONE rank's
+    #: experiences (K times the YAML's per update) instead of all ranks' (docs/cluster.md)
+    batch_per_rank: bool = False
 
     def behavior_settings(self, brain_name: str) -> TrainerSettings:
         """The settings for ``brain_name`` (no ``?team=``), with init_path resolved for
