@@ -598,9 +598,9 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         os.makedirs(os.path.join(run_dir, "run_logs"), exist_ok=True)  # this rank's simulators' logs
     warn_if_not_loopback(env.bind, str(DEFAULT_EDITOR_PORT) if env.env_path is None else
                          f"{env.base_port}" + (f"-{env.base_port + env.num_envs - 1}" if env.num_envs > 1 else ""))
-    # Start-up (docs/architecture.md): the simulators boot from here on. Meanwhile torch, the
-    # networks and the ONNX exporter are imported in the background, and this thread sets up the
-    # results folder's files and answers the handshake and the first RESET before it needs torch.
+    # the simulators boot from here on; meanwhile torch, the networks and the ONNX exporter are
+    # imported in the background, and this thread sets up the results folder's files and answers
+    # the handshake and the first RESET before it needs torch (docs/performance.md, "Start-up and exit")
     pool.launch()
     warmup.start()
     try:

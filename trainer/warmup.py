@@ -2,7 +2,7 @@
 
 Importing torch takes seconds on a small machine, longer than the stub (0.3 s) or a small Unity
 build takes to boot and connect. Imported in the main thread before the handshake, it made the
-simulator wait for the trainer (docs/architecture.md, "Start-up"). Imported here, it overlaps
+simulator wait for the trainer (docs/performance.md, "Start-up and exit"). Imported here, it overlaps
 with the simulator's boot, the handshake, the first RESET and the results folder's set-up, which
 the main thread does meanwhile (waiting on sockets mostly, which releases the GIL). The main
 thread then simply imports what it needs: Python's import lock makes it wait for a module this
