@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from protos.types import BehaviorSpec  # noqa: E402
 from trainer.behavior import sac_hyperparams_from_settings  # noqa: E402
 from trainer.config.cli_args import parse_run_options  # noqa: E402
-from trainer.ppo.buffer import Trajectory  # noqa: E402
+from trainer.common.trajectory import Trajectory
 from trainer.sac.trainer import SACTrainer  # noqa: E402
 from unity_stub_env.tasks import make_task  # noqa: E402
 

@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from protos.types import BehaviorSpec, DecisionSteps, TerminalSteps
-from trainer.ppo.buffer import GroupColumns, Trajectory
+from trainer.common.trajectory import GroupColumns, Trajectory
 
 
 @dataclass

@@ -85,3 +85,12 @@ def test_the_stubs_public_api_is_there():
 def test_the_status_200_header_is_protobufs():
     header = header_pb2.HeaderProto(status=200).SerializeToString()
     assert wire.HEADER_OK_FIELD == b"\x0a" + bytes([len(header)]) + header == b"\x0a\x03\x08\xc8\x01"
+
+
+def test_the_stub_imports_only_public_names_of_protos():
+    """What the stub shares with the trainer (the HTTP/2 framing, the codec pieces) is public in
+    ``protos``: a private name imported across the boundary would be a contract nobody sees."""
+    bad = [f"{where}:{line} imports {module} {[n for n in names if n.startswith('_')]}"
+           for where, line, module, names in imports("unity_stub_env")
+           if top(module) == "protos" and any(n.startswith("_") for n in names)]
+    assert bad == []

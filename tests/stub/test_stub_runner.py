@@ -10,7 +10,7 @@ import pytest
 from protos import side_channels as sc
 from trainer.config.env_params import hmm_model, hmm_sequences, structure_environment_parameters
 from trainer.curriculum import EnvironmentParameterManager
-from trainer.run import environment_parameter_messages
+from trainer.side_channel_payloads import environment_parameter_messages
 from unity_stub_env.communicator import SideChannelState
 from unity_stub_env.tasks import EnvironmentParameters, make_task
 from unity_stub_env.tasks import runner as R

@@ -16,7 +16,7 @@ from protos.types import (
 )
 from trainer.artifacts.onnx_export import export_policy
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.policy import Policy
+from trainer.common.policy import Policy
 
 HYPER = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
 CONTINUOUS_OUTPUTS = ["continuous_actions", "continuous_action_output_shape", "deterministic_continuous_actions"]

@@ -243,7 +243,7 @@ def test_unknown_channel_warned_once_per_id(caplog):
 
 
 def test_a_runs_simulators_warn_about_an_unknown_channel_once_between_them(caplog):
-    from trainer.run import make_routers
+    from trainer.side_channel_payloads import make_routers
 
     unknown = uuid.UUID("00000000-0000-0000-0000-0000000000cc")
     data = sc.pack_messages([(unknown, b"x")])

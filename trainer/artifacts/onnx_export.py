@@ -19,8 +19,8 @@ import torch
 from torch import nn
 
 from trainer.artifacts.atomic import atomic_write
-from trainer.ppo.networks import Actor
-from trainer.ppo.policy import CONTINUOUS_CLIP, Policy
+from trainer.common.networks import Actor
+from trainer.common.policy import CONTINUOUS_CLIP, Policy
 
 ONNX_OPSET = 9
 BATCH_AXIS = "batch"

@@ -16,7 +16,7 @@ environment: ``MLAGENTS_LIKE_IMAGE`` (run inside that container image) and ``MLA
 =============================  ================  ====================================================
 variable                       field             default and meaning
 =============================  ================  ====================================================
-MLAGENTS_LIKE_TORCH_THREADS    ``torch_threads``  1: torch's intra-op threads (trainer/run.py)
+MLAGENTS_LIKE_TORCH_THREADS    ``torch_threads``  1: torch's intra-op threads (trainer/run_setup.py)
 MLAGENTS_LIKE_BLAS_THREADS     ``blas_threads``   None: numpy's BLAS gets 1 thread unless the user set
                                                  OPENBLAS_NUM_THREADS / OMP_NUM_THREADS /
                                                  MKL_NUM_THREADS (trainer/cli.py)
@@ -24,8 +24,9 @@ MLAGENTS_LIKE_SPIN_WAIT_MS     ``spin_wait_s``    1 ms: how long a waiting side 
                                                  answer; 0 always sleeps (protos/pacing.py)
 MLAGENTS_LIKE_TRANSPORT        ``transport``      http2: the gRPC transport of the trainer's server and
                                                  of the stubs it launches; or grpcio
-MLAGENTS_LIKE_NUMPY_UPDATE     ``numpy_update``   1: PPO's minibatch steps in numpy where the network
-                                                 allows it; 0 keeps torch autograd (trainer/ppo)
+MLAGENTS_LIKE_NUMPY_UPDATE     ``numpy_update``   1: PPO's minibatch steps and SAC's gradient steps in
+                                                 numpy where the networks allow it; 0 keeps torch
+                                                 autograd for both (POCA always uses autograd)
 MLAGENTS_LIKE_DIST_TIMEOUT_S   ``dist_timeout_s`` 300: seconds a rank waits for the others in a
                                                  collective before it gives up (trainer/distributed.py)
 MLAGENTS_LIKE_DIST_SYNC_EVERY  ``dist_sync_      8: data-parallel ranks agree (stop, steps, normalisers,

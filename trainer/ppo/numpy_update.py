@@ -49,9 +49,9 @@ import time
 import numpy as np
 
 from trainer.envs.cpus import usable_cpus
-from trainer.ppo import numpy_net
-from trainer.ppo.adam import Adam, Stretch
-from trainer.ppo.distributions import EPSILON, MASKED_LOGIT_OFFSET
+from trainer.common import numpy_net
+from trainer.common.adam import Adam, Stretch
+from trainer.common.distributions import EPSILON, MASKED_LOGIT_OFFSET
 
 logger = logging.getLogger(__name__)
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Callable, Mapping
 
 from protos.communicator_objects import unity_message_pb2
 from protos.errors import ProtocolError
-from protos.http2 import GRPC_INTERNAL, Http2Transport
+from protos.http2 import GRPC_INTERNAL
 from protos.types import ActionTuple, BehaviorSpec, StepResult
 from protos.versions import COMMUNICATION_VERSION, PACKAGE_VERSION, all_true_capabilities
 from trainer.config.env_vars import TRANSPORTS
@@ -41,6 +41,7 @@ from trainer.errors import (
     UnityTimeOutError,
 )
 from trainer.protocol import codec
+from trainer.protocol.http2_server import Http2Transport
 from trainer.stop import STOP
 
 if TYPE_CHECKING:  # grpcio is imported by its transport only (MLAGENTS_LIKE_TRANSPORT=grpcio)

@@ -1,7 +1,7 @@
 """The settings the SAC room needs, as one frozen dataclass (defaults: ML-Agents' SAC defaults).
 
 The network fields have the names and meaning of ``PPOHyperparams``' (trainer/ppo/hyperparams.py),
-so the networks of trainer/ppo/networks.py build from either.
+so the networks of trainer/common/networks.py build from either.
 """
 from __future__ import annotations
 
@@ -33,5 +33,5 @@ class SACHyperparams:
     sequence_length: int = 64  # with memory: experiences per sampled sequence
     # reward signal name -> (gamma, strength)
     reward_signals: dict[str, tuple[float, float]] = field(default_factory=lambda: {"extrinsic": (0.99, 1.0)})
-    # curiosity / rnd (/ any provider of trainer/ppo/reward_providers.py) -> its own network
+    # curiosity / rnd (/ any provider of trainer/common/reward_providers.py) -> its own network
     reward_signal_networks: dict[str, SignalNetwork] = field(default_factory=dict)

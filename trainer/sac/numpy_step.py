@@ -36,9 +36,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from trainer.ppo import numpy_net
-from trainer.ppo.distributions import EPSILON
-from trainer.ppo.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN
+from trainer.common import numpy_net
+from trainer.common.distributions import EPSILON
+from trainer.common.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN
 from trainer.sac import losses
 from trainer.sac.policy import _entropy, _numpy_squashed_log_prob
 
