@@ -36,6 +36,7 @@ other ranks' statistics reach it at every summary (``gather_stats``).
 """
 from __future__ import annotations
 
+import dataclasses
 import fcntl
 import hashlib
 import logging
@@ -44,7 +45,6 @@ import socket
 import struct
 import subprocess
 import zlib
-import dataclasses
 from dataclasses import dataclass, field
 from datetime import timedelta
 

@@ -5,6 +5,7 @@ both at the same exchange; a rank that dies ends the run with rank 0's final che
 (tests/slurm/test_ranks.py runs the same under srun, on one node and on two.)"""
 from __future__ import annotations
 
+import multiprocessing
 import os
 import re
 import signal
@@ -12,9 +13,6 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-
-import multiprocessing
-import dataclasses
 
 import numpy as np
 import pytest
@@ -254,5 +252,5 @@ def test_a_batch_the_ranks_cannot_share_is_one_message_and_exit_2(tmp_path, env_
     options = parse_run_options([str(cfg), "--batch-per-rank"])
     check_split(options, 4)
     assert split(options.behaviors["Basic"], 4, options.batch_per_rank).hyperparameters.batch_size == 30
-    halves = split(dataclasses.replace(options.behaviors["Basic"]), 2, False).hyperparameters
+    halves = split(options.behaviors["Basic"], 2, False).hyperparameters
     assert (halves.batch_size, halves.buffer_size) == (15, 64)
