@@ -23,88 +23,28 @@ from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
 from trainer.errors import ConfigError, UserError
 from trainer.common.trainer_interface import Trainer
 from trainer.common.trajectory import Trajectory
-from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
+from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer
 from trainer.selfplay import ELO_STAT, SelfPlay, TeamController
 
 logger = logging.getLogger("mlagents_like")
 
 
-def hyperparams_from_settings(settings) -> PPOHyperparams:
-    """Map a behavior's TrainerSettings (trainer/config) onto the PPO room's own dataclass."""
-    h = settings.hyperparameters
-    n = settings.network_settings
-    return PPOHyperparams(  # POCA's settings are PPO's without shared_critic
-        batch_size=h.batch_size,
-        buffer_size=h.buffer_size,
-        learning_rate=h.learning_rate,
-        beta=h.beta,
-        epsilon=h.epsilon,
-        lambd=h.lambd,
-        num_epoch=h.num_epoch,
-        shared_critic=getattr(h, "shared_critic", False),
-        learning_rate_schedule=h.learning_rate_schedule,
-        beta_schedule=h.beta_schedule,
-        epsilon_schedule=h.epsilon_schedule,
-        max_steps=settings.max_steps,
-        normalize=n.normalize,
-        hidden_units=n.hidden_units,
-        num_layers=n.num_layers,
-        vis_encode_type=n.vis_encode_type,
-        deterministic=n.deterministic,
-        memory_size=n.memory.memory_size if n.memory is not None else 0,
-        sequence_length=n.memory.sequence_length if n.memory is not None else 64,
-        reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
-        reward_signal_networks=signal_networks(settings),
-    )
-
-
-def signal_networks(settings) -> dict[str, SignalNetwork]:
-    """Each intrinsic reward signal's own network settings (PPO and SAC alike)."""
-    return {
-        name: SignalNetwork(learning_rate=rs.learning_rate, hidden_units=rs.network_settings.hidden_units,
-                            num_layers=rs.network_settings.num_layers,
-                            normalize=rs.network_settings.normalize,
-                            vis_encode_type=rs.network_settings.vis_encode_type,
-                            use_actions=getattr(rs, "use_actions", False), use_vail=getattr(rs, "use_vail", False))
-        for name, rs in settings.reward_signals.items() if name != "extrinsic"
-    }
-
-
-def sac_hyperparams_from_settings(settings) -> "SACHyperparams":
-    """Map a ``trainer_type: sac`` behavior's TrainerSettings onto the SAC room's dataclass."""
-    from trainer.sac.hyperparams import SACHyperparams
-
-    h = settings.hyperparameters
-    n = settings.network_settings
-    return SACHyperparams(
-        batch_size=h.batch_size, buffer_size=h.buffer_size, learning_rate=h.learning_rate,
-        learning_rate_schedule=h.learning_rate_schedule, buffer_init_steps=h.buffer_init_steps, tau=h.tau,
-        steps_per_update=h.steps_per_update, save_replay_buffer=h.save_replay_buffer,
-        init_entcoef=h.init_entcoef, reward_signal_steps_per_update=h.reward_signal_steps_per_update,
-        max_steps=settings.max_steps, normalize=n.normalize, hidden_units=n.hidden_units,
-        num_layers=n.num_layers, vis_encode_type=n.vis_encode_type, deterministic=n.deterministic,
-        memory_size=n.memory.memory_size if n.memory is not None else 0,
-        sequence_length=n.memory.sequence_length if n.memory is not None else 64,
-        reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
-        reward_signal_networks=signal_networks(settings),
-    )
-
-
 def make_trainer(brain: str, spec: BehaviorSpec, settings, seed: int, device: str, use_numpy_update: bool
                  ) -> Trainer:
     """The trainer of ``settings.trainer_type`` (the config refuses the types not trained here)."""
     if settings.trainer_type == "sac":
+        from trainer.sac.hyperparams import SACHyperparams
         from trainer.sac.trainer import SACTrainer
 
-        trainer = SACTrainer(brain, spec, sac_hyperparams_from_settings(settings), seed=seed, device=device,
+        trainer = SACTrainer(brain, spec, SACHyperparams.from_settings(settings), seed=seed, device=device,
                              use_numpy_update=use_numpy_update)
     elif settings.trainer_type == "poca":
         from trainer.poca.trainer import POCATrainer
 
-        trainer = POCATrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device)
+        trainer = POCATrainer(brain, spec, PPOHyperparams.from_settings(settings), seed=seed, device=device)
     else:
-        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
+        trainer = PPOTrainer(brain, spec, PPOHyperparams.from_settings(settings), seed=seed, device=device,
                              use_numpy_update=use_numpy_update)
     attach_demonstrations(trainer, brain, spec, settings, seed)
     return trainer

@@ -1,5 +1,6 @@
-"""The runner task (seed 004): specs, the track generator, the kinematics by hand, the shipped
-models, and the hmm sampler's sequences arriving through the side-channel encoding."""
+"""The runner task (the runner thesis, docs/stub-tasks.md): specs, the track generator, the
+kinematics by hand, the shipped models, and the hmm sampler's sequences arriving through the
+side-channel encoding."""
 from __future__ import annotations
 
 import math

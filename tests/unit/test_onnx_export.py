@@ -1,4 +1,4 @@
-"""ONNX export checked with onnxruntime against the contract of docs/outputs.md §8 and the torch policy."""
+"""ONNX export checked with onnxruntime against the contract of docs/outputs.md, "The ONNX model" and the torch policy."""
 from __future__ import annotations
 
 import numpy as np

@@ -5,7 +5,7 @@ learns from a minibatch (``update``, its own Adam) and has a value head of its o
 critic. PPO and SAC share them: PPO rewards each trajectory once and updates on every PPO
 minibatch; SAC rewards every sampled replay minibatch afresh and updates on minibatches of
 their own (docs/sac.md). ``hyperparams`` is either room's dataclass (the network fields are
-named alike). Behaviour as in ML-Agents Release 22 (docs/ppo.md §10):
+named alike). Behaviour as in ML-Agents Release 22 (docs/ppo.md, "PPO details that affect results"):
 
 * Both ignore ``done``: their returns are always bootstrapped with V(next obs).
 * Curiosity: a state encoder phi (a network body with the signal's network_settings), an inverse

@@ -7,8 +7,9 @@ thread reads the request off the socket and writes the answer back; nothing else
 
 Why not python-hyper's ``h2`` state machine on this same thread: measured with
 ``bench/transport.py`` (bench/peers/h2_transport.py, numbers in bench/RESULTS.md), it costs
-about 150 us of the trainer's time per exchange where this costs about 20 us, which halves
-bench/protocol.py's exchanges/s for basic; the issue's rule was to adopt it only within 5 %.
+several times this server's cost of the trainer's time per exchange, which halves
+bench/protocol.py's exchanges/s for basic; a well-kept library is preferred only while it costs
+at most 5 % end to end (docs/performance.md, "The transport").
 So this file does what ``h2`` would enforce for a server of unary calls, each case tested in
 tests/protocol/test_http2_conformance.py: a peer that breaks RFC 9113 gets GOAWAY (connection
 errors) or RST_STREAM (stream errors) with the RFC's error code and the trainer logs one line.
@@ -609,7 +610,7 @@ class Http2Transport:
         self._ready: collections.deque[IncomingCall] = collections.deque()
         self.reader = ReadBuffer()
         # the connection whose calls the trainer takes; others are refused while it lives, so a
-        # second client on the port cannot inject steps into the session (docs/protocol.md §1.8)
+        # second client on the port cannot inject steps into the session (docs/protocol.md, "Malformed HTTP/2")
         self.session: _Connection | None = None
         self._next_sweep = 0.0
 
