@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import queue
 import re
 import signal
 import subprocess
@@ -168,9 +169,9 @@ def _update_weights(rank: int, world: int, port: int, numpy_update: bool, out) -
 
     from protos.types import ActionSpec, BehaviorSpec
     from tests.unit.test_ppo_numpy_update import feed, vec
-    from trainer.behavior import hyperparams_from_settings
     from trainer.config.settings import NetworkSettings, PPOSettings, TrainerSettings
     from trainer.distributed import Ranks
+    from trainer.ppo.hyperparams import PPOHyperparams
     from trainer.ppo.trainer import PPOTrainer
 
     torch.set_num_threads(1)
@@ -185,7 +186,7 @@ def _update_weights(rank: int, world: int, port: int, numpy_update: bool, out) -
     share = UPDATE_ROWS // world
     assert (mine.hyperparameters.batch_size, mine.hyperparameters.buffer_size) == (share, share)
     spec = BehaviorSpec((vec(5), vec(3, "w")), ActionSpec(2, (4,)))
-    trainer = PPOTrainer("B", spec, hyperparams_from_settings(mine), seed=5, use_numpy_update=numpy_update)
+    trainer = PPOTrainer("B", spec, PPOHyperparams.from_settings(mine), seed=5, use_numpy_update=numpy_update)
     feed([trainer], True, (70, 90, 60), done=lambda k, length: length == 90)  # the same 220 rows everywhere
     data = trainer.buffer.concatenated()
     trainer.buffer.clear()
@@ -208,7 +209,15 @@ def _updates(world: int, numpy_update: bool) -> list[tuple[np.ndarray, np.ndarra
              for rank in range(world)]
     for p in procs:
         p.start()
-    got = dict((rank, (before, after)) for rank, before, after in (out.get(timeout=240) for _ in procs))
+    got = {}
+    deadline = time.monotonic() + 240
+    while len(got) < world:  # a rank that dies (an import error, say) fails the test now, not at the deadline
+        try:
+            rank, before, after = out.get(timeout=1)
+            got[rank] = (before, after)
+        except queue.Empty:
+            dead = [p.exitcode for p in procs if p.exitcode not in (None, 0)]
+            assert not dead and time.monotonic() < deadline, f"rank processes exited with {dead} or hung"
     for p in procs:
         p.join(timeout=60)
         assert p.exitcode == 0
