@@ -338,10 +338,8 @@ def main(argv: list[str] | None = None) -> int:
     # script compiles our editable tree (again here, in case it changed since). A git worktree
     # that shares another tree's venv must not re-point its editable install: it only compiles
     # its own tree, and "ours" runs that tree (PYTHONPATH).
-    # (from "/": with ``-c`` the working directory comes first on sys.path, and a worktree's own
-    # tree there would pass for the installed one and get the shared venv re-pointed to it)
-    installed = subprocess.run([str(OUR_PYTHON), "-c", "import trainer; print(trainer.__file__)"], env=env,
-                               capture_output=True, text=True, cwd="/").stdout.strip()
+    installed = subprocess.run([str(OUR_PYTHON), "-I", "-c", "import trainer; print(trainer.__file__)"], env=env,
+                               capture_output=True, text=True).stdout.strip()
     if installed and Path(installed).resolve().parents[1] == REPO.resolve():
         subprocess.run([str(REPO / "scripts" / "ensure_venv.sh")], check=True)
     else:
