@@ -3,6 +3,7 @@
     .venv/bin/python bench/ranks.py allreduce [--repeats 5 --calls 200]
     .venv/bin/python bench/ranks.py train [--task basic] [--max-steps 20000] [--seed 1]
     .venv/bin/python bench/ranks.py srun [--task basic] [--max-steps 10000] [--pairs 2]   (root: starts a private Slurm)
+    .venv/bin/python bench/ranks.py learn [--task basic] [--max-steps 10000] [--seeds 1 2 3]   (root: private Slurm)
 
 allreduce  two gloo processes on 127.0.0.1 (the cost on one node; between nodes add the network's
            latency and bandwidth): the all-reduce of one flat float32 gradient buffer (what Adam
@@ -11,18 +12,25 @@ allreduce  two gloo processes on 127.0.0.1 (the cost on one node; between nodes 
            update = per call x minibatch steps per update (num_epoch x buffer_size / batch_size);
            and the per-exchange agreement of trainer/distributed.py (two all-gathers of a few
            floats). Min over --repeats of the mean over --calls.
-train      the same task and step budget as 1 rank x 1 simulator, 2 ranks x 1 simulator (RANK /
-           WORLD_SIZE, two processes), 1 rank x 2 simulators (--num-envs 2), and 2 ranks with
-           buffer_size and batch_size halved (per rank: the updates of one process): wall seconds,
+train      the same task, YAML and step budget as 1 rank x 1 simulator, 2 ranks x 1 simulator (RANK /
+           WORLD_SIZE, two processes; buffer_size and batch_size split between them, the default),
+           1 rank x 2 simulators (--num-envs 2), and 2 ranks with --batch-per-rank (each rank
+           the YAML's values: half the updates of one process): wall seconds,
            agent steps/s in all and per rank, steady steps/s from the summaries' own times, and
            the mean reward at every summary step (rank 0's TensorBoard).
 srun       the same 1-rank training run directly and as `srun -n 1` in a private one-node Slurm
            (tests/slurm/cluster.py), alternating, --pairs times: the overhead of srun.
+learn      one YAML (the task's config, unchanged) as `srun -n 1` and as `srun -n 2` in a private
+           one-node Slurm, for each of --seeds: the mean reward at the last common summary step
+           (equal total steps: max_steps counts both ranks' steps). buffer_size and batch_size are
+           global (trainer/distributed.py), so 2 ranks should reach the single rank's reward: the
+           2 ranks' mean is compared with the single rank's seeds' spread (min..max).
 Prints markdown; writes JSON to bench/out/ranks_<mode>.json.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import subprocess
@@ -73,7 +81,10 @@ def parameter_counts(measure: bool = False) -> list[dict]:
         rows.append({"network": name, "parameters": int(trainer.optimizer.exp_avg.size),
                      "steps_per_update": h["num_epoch"] * (h["buffer_size"] // h["batch_size"]),
                      "normalizer_floats": sum(1 + 2 * m.running_mean.numel() for m in trainer.normalizers()),
-                     "compute_per_step_ms": update_compute_ms(name, cls, hp) if measure else None})
+                     "compute_per_step_ms": update_compute_ms(name, cls, hp) if measure else None,
+                     # what each of 2 ranks computes per step: a minibatch of batch_size / 2 rows
+                     "compute_half_ms": update_compute_ms(name, cls, dataclasses.replace(
+                         hp, batch_size=hp.batch_size // 2)) if measure else None})
     return rows
 
 
@@ -164,11 +175,12 @@ def bench_allreduce(args) -> dict:
     mp.spawn(_allreduce_worker, args=(free_port_block(1), rows, args.repeats, args.calls, out), nprocs=2)
     results = json.loads(Path(out).read_text())
     os.unlink(out)
-    lines = ["| network | parameters | compute per minibatch step | all-reduce per step: mean (fastest) | "
-             "steps per update | all-reduce per update: mean (fastest) | agreement: mean (fastest) |",
+    lines = ["| network | parameters | compute per minibatch step c (batch_size / 2: c_2) | all-reduce per step: "
+             "mean (fastest) | steps per update | all-reduce per update: mean (fastest) | agreement: mean (fastest) |",
              "|---|---:|---:|---:|---:|---:|---:|"]
     for r in results:
-        lines.append(f"| {r['network']} | {r['parameters']:,} | {r['compute_per_step_ms']:.2f} ms | "
+        lines.append(f"| {r['network']} | {r['parameters']:,} | {r['compute_per_step_ms']:.2f} "
+                     f"({r['compute_half_ms']:.2f}) ms | "
                      f"{r['allreduce_us']:.0f} ({r['allreduce_best_us']:.0f}) µs"
                      f" | {r['steps_per_update']} | {r['per_update_ms']:.1f} ({r['per_update_best_ms']:.1f}) ms | "
                      f"{r['agree_us']:.0f} ({r['agree_best_us']:.0f}) µs |")
@@ -176,17 +188,14 @@ def bench_allreduce(args) -> dict:
 
 
 # --------------------------------------------------------------------------------- training
-def write_config(task: str, max_steps: int, folder: Path, divide: int = 1) -> Path:
-    """The task's config with ``max_steps``, no checkpoint inside the run, and buffer_size and
-    batch_size divided by ``divide`` (K ranks with the updates of one process)."""
+def write_config(task: str, max_steps: int, folder: Path) -> Path:
+    """The task's config with ``max_steps`` and no checkpoint inside the run."""
     config = yaml.safe_load((ROOT / "configs" / f"{task}.yaml").read_text())
     for settings in config["behaviors"].values():
-        for key in ("buffer_size", "batch_size"):
-            settings["hyperparameters"][key] //= divide
         settings["max_steps"] = max_steps
         settings["checkpoint_interval"] = 100 * max_steps
         settings["summary_freq"] = max(500, min(settings["summary_freq"], max_steps // 10))
-    path = folder / f"{task}{'' if divide == 1 else f'_div{divide}'}.yaml"
+    path = folder / f"{task}.yaml"
     path.write_text(yaml.safe_dump(config, sort_keys=False))
     return path
 
@@ -203,14 +212,14 @@ def read_rewards(behavior_dir: Path) -> list[dict]:
 
 
 def run_setup(label: str, task: str, config: Path, folder: Path, seed: int, ranks: int, envs: int,
-              prefix: list[str] | None = None, slurm_env: dict | None = None) -> dict:
+              prefix: list[str] | None = None, slurm_env: dict | None = None, extra_args: tuple = ()) -> dict:
     """One training: ``ranks`` processes (RANK / WORLD_SIZE) with ``envs`` simulators each."""
     from tests.integration.conftest import free_port_block
 
     results = folder / "results"
     base, master = free_port_block(ranks * envs), free_port_block(1)
     args = [str(config), "--env", f"stub:{task}", "--seed", str(seed), "--run-id", label, "--results-dir",
-            str(results), "--base-port", str(base), "--num-envs", str(envs)]
+            str(results), "--base-port", str(base), "--num-envs", str(envs), *extra_args]
     procs = []
     started = time.perf_counter()
     for rank in range(ranks):
@@ -237,16 +246,16 @@ def run_setup(label: str, task: str, config: Path, folder: Path, seed: int, rank
 def bench_train(args) -> dict:
     folder = Path(tempfile.mkdtemp(prefix="bench-ranks-"))
     config = write_config(args.task, args.max_steps, folder)
-    halved = write_config(args.task, args.max_steps, folder, divide=2)
     runs = [run_setup(f"{r}rank_x{e}env", args.task, config, folder, args.seed, r, e)
             for r, e in ((1, 1), (2, 1), (1, 2))]
-    runs.append(run_setup("2rank_x1env_halved", args.task, halved, folder, args.seed, 2, 1))
+    runs.append(run_setup("2rank_x1env_per_rank", args.task, config, folder, args.seed, 2, 1,
+                          extra_args=("--batch-per-rank",)))
     lines = ["| setup | wall s | agent steps/s | per rank | steady steps/s | reward at the last common summary |",
              "|---|---:|---:|---:|---:|---:|"]
     common = min(r["final_step"] for r in runs)
     for r in runs:
         at = [x["value"] for x in r["rewards"] if x["step"] <= common]
-        note = ", buffer/batch ÷ 2" if r["setup"].endswith("halved") else ""
+        note = ", --batch-per-rank" if r["setup"].endswith("per_rank") else ""
         lines.append(f"| {r['ranks']} rank x {r['envs_per_rank']} sim{note} | {r['wall_s']:.1f} | "
                      f"{r['steps_per_s']:.0f} | "
                      f"{r['per_rank_steps_per_s']:.0f} | {r['steady_steps_per_s'] or 0:.0f} | "
@@ -284,24 +293,82 @@ def bench_srun(args) -> dict:
             "markdown": "\n".join(lines)}
 
 
+def srun_setup(label: str, task: str, config: Path, folder: Path, seed: int, ranks: int, slurm_conf: str) -> dict:
+    """One training as `srun -n ranks` (each task a rank, one simulator each): the final
+    summary's reward and the wall time."""
+    from tests.integration.conftest import free_port_block
+
+    results = folder / "results"
+    args = [str(config), "--env", f"stub:{task}", "--seed", str(seed), "--run-id", label, "--results-dir",
+            str(results), "--base-port", str(free_port_block(ranks))]
+    started = time.perf_counter()
+    with open(folder / f"{label}.log", "w") as log:
+        code = subprocess.run(["srun", "-n", str(ranks), "--mem=2G", "--cpus-per-task=1", "--kill-on-bad-exit=1",
+                               *LEARN, *args], cwd=folder, env=env_for_children(SLURM_CONF=slurm_conf),
+                              stdout=log, stderr=subprocess.STDOUT, timeout=3600).returncode
+    behavior = next(iter(yaml.safe_load(config.read_text())["behaviors"]))
+    return {"setup": label, "ranks": ranks, "seed": seed, "exit_code": code, "wall_s": time.perf_counter() - started,
+            "rewards": read_rewards(results / label / behavior)}
+
+
+def bench_learn(args) -> dict:
+    from tests.slurm.cluster import Cluster
+
+    folder = Path(tempfile.mkdtemp(prefix="bench-learn-"))
+    config = write_config(args.task, args.max_steps, folder)
+    cluster = Cluster().start()
+    try:
+        runs = []
+        for i, seed in enumerate(args.seeds):  # alternating which goes first: the load drifts
+            for ranks in ((1, 2) if i % 2 == 0 else (2, 1)):
+                runs.append(srun_setup(f"{ranks}rank_seed{seed}", args.task, config, folder, seed, ranks,
+                                       cluster.env["SLURM_CONF"]))
+    finally:
+        cluster.stop()
+    common = min(r["rewards"][-1]["step"] for r in runs if r["rewards"])
+    for r in runs:
+        at = [x["value"] for x in r["rewards"] if x["step"] <= common]
+        r["reward"] = at[-1] if at else float("nan")
+    lines = [f"`{args.task}`, {args.max_steps} steps, the reward at step {common} (the last common summary):", "",
+             "| ranks | " + " | ".join(f"seed {s}" for s in args.seeds) + " | mean | min..max | wall s (mean) |",
+             "|---|" + "---:|" * (len(args.seeds) + 3)]
+    summary = {}
+    for ranks in (1, 2):
+        mine = sorted((r for r in runs if r["ranks"] == ranks), key=lambda r: args.seeds.index(r["seed"]))
+        values = [r["reward"] for r in mine]
+        summary[ranks] = {"mean": sum(values) / len(values), "min": min(values), "max": max(values)}
+        lines.append(f"| {ranks} | " + " | ".join(f"{v:.3f}" for v in values) +
+                     f" | {summary[ranks]['mean']:.3f} | {summary[ranks]['min']:.3f}..{summary[ranks]['max']:.3f} | "
+                     f"{sum(r['wall_s'] for r in mine) / len(mine):.0f} |")
+    inside = summary[1]["min"] <= summary[2]["mean"] <= summary[1]["max"]
+    lines.append(f"\n2 ranks' mean {summary[2]['mean']:.3f} is {'inside' if inside else 'OUTSIDE'} the single rank's "
+                 f"seeds' spread {summary[1]['min']:.3f}..{summary[1]['max']:.3f} "
+                 f"(exit codes {[r['exit_code'] for r in runs]})")
+    return {"task": args.task, "max_steps": args.max_steps, "seeds": args.seeds, "common_step": common, "runs": runs,
+            "summary": summary, "inside_spread": inside, "markdown": "\n".join(lines)}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("mode", choices=("allreduce", "train", "srun"))
+    parser.add_argument("mode", choices=("allreduce", "train", "srun", "learn"))
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--calls", type=int, default=200)
     parser.add_argument("--task", default="basic")
     parser.add_argument("--max-steps", type=int, default=20000)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--pairs", type=int, default=2)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out")
     args = parser.parse_args(argv)
-    result = {"allreduce": bench_allreduce, "train": bench_train, "srun": bench_srun}[args.mode](args)
+    result = {"allreduce": bench_allreduce, "train": bench_train, "srun": bench_srun,
+              "learn": bench_learn}[args.mode](args)
     result["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     result["load_1min"] = os.getloadavg()[0]
     print(result["markdown"])
     print(f"\n{result['date']}, load average {result['load_1min']:.2f} (1 min), {os.cpu_count()} CPUs")
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"ranks_{args.mode}.json").write_text(json.dumps(result, indent=1))
+    name = f"ranks_{args.mode}" + (f"_{args.task}" if args.mode == "learn" else "")
+    (args.out / f"{name}.json").write_text(json.dumps(result, indent=1))
     return 0
 
 

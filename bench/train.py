@@ -70,6 +70,9 @@ TARGET_SPEEDUP = 10.0
 REWARD_TOLERANCE = 1e-6  # relative, for float32 rounding of episode returns
 LAST_SUMMARIES = 3
 ONNXSCRIPT_FAILURE = "No module named 'onnxscript'"
+# --task 2x20k: two behaviors x 8 agents, 20k steps each, on the stub's mirror task (bench/startup.py)
+STUB_TASKS = {"2x20k": f"mirror={REPO / 'bench' / 'startup' / 'two_behaviors.json'}"}
+CONFIGS = {"2x20k": REPO / "bench" / "startup" / "two_behaviors.yaml"}
 
 
 def free_port() -> int:
@@ -99,7 +102,7 @@ def stub_launcher(folder: Path, task: str) -> Path:
 def write_bench_config(source: Path, target: Path, max_steps: int | None) -> dict:
     """Copy the trainer YAML with ``max_steps`` overridden and checkpoints pushed past the end."""
     config = yaml.safe_load(source.read_text())
-    for settings in config["behaviors"].values():
+    for settings in [config.get("default_settings") or {}, *config["behaviors"].values()]:
         if max_steps is not None:
             settings["max_steps"] = max_steps
         settings["checkpoint_interval"] = 100 * int(settings.get("max_steps", 500000))
@@ -299,7 +302,7 @@ def markdown(task: str, ours: dict, reference: dict, verdict: dict) -> str:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--task", choices=("basic", "ball3d", "dodge"), default="ball3d")
+    parser.add_argument("--task", choices=("basic", "ball3d", "dodge", "2x20k"), default="ball3d")
     parser.add_argument("--config", type=Path, default=None, help="default configs/<task>.yaml")
     parser.add_argument("--max-steps", type=int, default=None)
     parser.add_argument("--num-areas", type=int, default=None)
@@ -323,7 +326,8 @@ def main(argv: list[str] | None = None) -> int:
         print("--seeds runs one pair per seed; drop --pairs")
         return 2
     seeds = args.seeds or [args.seed] * max(1, args.pairs)
-    source = args.config or REPO / "configs" / f"{args.task}.yaml"
+    source = args.config or CONFIGS.get(args.task) or REPO / "configs" / f"{args.task}.yaml"
+    stub_task = STUB_TASKS.get(args.task, args.task)
     for needed in (OUR_LEARN,) if args.reference_tree else (OUR_LEARN, REFERENCE_LEARN):
         if not needed.exists():
             print(f"missing {needed}: run ./scripts/ensure_interop_venv.sh / install the project")
@@ -355,14 +359,14 @@ def main(argv: list[str] | None = None) -> int:
         config_path = folder / source.name
         config = write_bench_config(source, config_path, args.max_steps)
         behavior = next(iter(config["behaviors"]))
-        exe = stub_launcher(folder, args.task)
+        exe = stub_launcher(folder, stub_task)
         for index, seed in enumerate(seeds):
             args.seed = seed
             pair_folder = folder / f"pair{index}" if len(seeds) > 1 else folder
             runs = {
-                "ours": lambda f=pair_folder: train("ours", OUR_LEARN, f"stub:{args.task}", config_path,
+                "ours": lambda f=pair_folder: train("ours", OUR_LEARN, f"stub:{stub_task}", config_path,
                                                     f / "ours", args, behavior, ours_env),
-                "reference": (lambda f=pair_folder: train("reference", OUR_LEARN, f"stub:{args.task}", config_path,
+                "reference": (lambda f=pair_folder: train("reference", OUR_LEARN, f"stub:{stub_task}", config_path,
                                                           f / "reference", args, behavior, reference_env))
                 if args.reference_tree else
                 (lambda f=pair_folder: train("reference", REFERENCE_LEARN, str(exe.with_suffix("")),

@@ -19,7 +19,12 @@ What stays identical on every rank, and how:
   * observation normalisers: each rank only accumulates its new observations' sums
     (trainer/common/normalizer.py ``defer``); ``agree`` adds every rank's sums and all ranks fold
     the same total in. (Alone, the normaliser updates at once, per trajectory, as ML-Agents.)
-  * when to update: when EVERY rank's buffer holds more than buffer_size (per rank) experiences;
+  * the YAML means the same on any number of ranks: buffer_size and batch_size are global, so
+    each of K ranks collects buffer_size / K and steps on minibatches of batch_size / K
+    (``split``; ``--batch-per-rank`` keeps the YAML's values on every rank instead). The mean of
+    the K ranks' minibatch gradients is then the gradient of one batch_size minibatch, and the
+    advantages are normalised with the mean and std of all ranks' buffers (``sum_``);
+  * when to update: when EVERY rank's buffer holds more than its share of buffer_size;
     all take the minibatches of the smallest buffer (PPOTrainer.update's ``rows``);
   * when to stop: a stop signal on any rank, or max_steps, is acted on by all at the same
     exchange, so none waits in a collective for a rank that left. A rank that dies or hangs
@@ -31,6 +36,7 @@ other ranks' statistics reach it at every summary (``gather_stats``).
 """
 from __future__ import annotations
 
+import dataclasses
 import fcntl
 import hashlib
 import logging
@@ -122,6 +128,48 @@ def interface_towards(addr: str) -> str | None:
     return None
 
 
+# --------------------------------------------------------------------------------- the split
+def split(settings, world: int, per_rank: bool, where: str = "behaviors"):
+    """The TrainerSettings one of ``world`` ranks trains with: buffer_size and batch_size (and
+    behavioral_cloning's batch_size, when set) divided by ``world``; unchanged alone or with
+    ``per_rank`` (--batch-per-rank). ConfigError (exit 2) when a value does not divide evenly."""
+    if world == 1 or per_rank:
+        return settings
+    h = settings.hyperparameters
+    for key, value in (("buffer_size", h.buffer_size), ("batch_size", h.batch_size)):
+        if value % world or value < world:
+            near = [n for n in (value - value % world, value - value % world + world) if n >= world]
+            raise ConfigError(
+                f"{where}.hyperparameters.{key} is {value}: with {world} data-parallel ranks it must be a multiple "
+                f"of {world} (buffer_size and batch_size count all ranks' experiences; each rank takes 1/{world}). "
+                f"Use {' or '.join(map(str, near))}, or --batch-per-rank to make both per-rank values "
+                f"(docs/cluster.md).")
+    memory = settings.network_settings.memory
+    if memory is not None and h.batch_size // world < memory.sequence_length:
+        raise ConfigError(
+            f"{where}.hyperparameters.batch_size {h.batch_size} / {world} ranks = {h.batch_size // world} is "
+            f"shorter than network_settings.memory.sequence_length {memory.sequence_length}: each rank's "
+            f"minibatch must hold whole sequences. Raise batch_size to at least "
+            f"{world * memory.sequence_length}, or use --batch-per-rank (docs/cluster.md).")
+    hyperparameters = dataclasses.replace(h, buffer_size=h.buffer_size // world, batch_size=h.batch_size // world)
+    bc = settings.behavioral_cloning
+    if bc is not None and bc.batch_size is not None:
+        bc = dataclasses.replace(bc, batch_size=max(bc.batch_size // world, 1))
+    return dataclasses.replace(settings, hyperparameters=hyperparameters, behavioral_cloning=bc)
+
+
+def check_split(options, world: int) -> None:
+    """Refuse, before a simulator starts, a configured behavior whose buffer_size or batch_size
+    the ranks cannot share (``split``'s ConfigError)."""
+    if world == 1 or options.batch_per_rank:
+        return
+    configured = [("default_settings", options.default_settings),
+                  *((f"behaviors.{name}", s) for name, s in options.behaviors.items())]
+    for where, settings in configured:
+        if settings is not None:
+            split(settings, world, False, where)
+
+
 # --------------------------------------------------------------------------------- the ranks
 @dataclass
 class _Brain:
@@ -145,6 +193,7 @@ class Ranks:
     device: str = "cpu"
     debug_weights: str | None = None
     sync_every: int = 1  # exchanges per agreement (MLAGENTS_LIKE_DIST_SYNC_EVERY)
+    per_rank: bool = False  # --batch-per-rank: buffer_size and batch_size are each rank's (``split``)
     exchanges: int = 0
     broken: bool = False  # a collective failed: from now on everything is local
     brains: dict[str, _Brain] = field(default_factory=dict)
@@ -159,9 +208,9 @@ class Ranks:
 
     # ------------------------------------------------------------------ setup
     @classmethod
-    def start(cls, env_vars: EnvVars, device: str | None) -> "Ranks":
+    def start(cls, env_vars: EnvVars, device: str | None, per_rank: bool = False) -> "Ranks":
         """Join the process group of the launcher's ranks (blocks until all have joined, at most
-        MLAGENTS_LIKE_DIST_TIMEOUT_S), or the run alone."""
+        MLAGENTS_LIKE_DIST_TIMEOUT_S), or the run alone. ``per_rank``: --batch-per-rank."""
         r = env_vars.ranks
         if r.world_size == 1:
             return cls(debug_weights=env_vars.debug_weights)
@@ -190,14 +239,16 @@ class Ranks:
         STOP.deferred = True  # stop signals are acted on in ``agree``, by every rank at once
         ranks = cls(rank=r.rank, world=r.world_size, backend=backend,
                     device=f"cuda:{r.local_rank}" if backend == "nccl" else "cpu",
-                    debug_weights=env_vars.debug_weights, sync_every=env_vars.dist_sync_every)
+                    debug_weights=env_vars.debug_weights, sync_every=env_vars.dist_sync_every, per_rank=per_rank)
         if backend == "nccl":
             import torch
 
             torch.cuda.set_device(r.local_rank)
-        logger.info("%d data-parallel ranks joined; rank 0 writes every file. buffer_size and batch_size "
-                    "are per rank: an update uses %d x buffer_size experiences, each gradient step %d x "
-                    "batch_size (docs/cluster.md).", r.world_size, r.world_size, r.world_size)
+        logger.info("%d data-parallel ranks joined; rank 0 writes every file. %s (docs/cluster.md).", r.world_size,
+                    f"--batch-per-rank: buffer_size and batch_size are each rank's, an update uses {r.world_size} x "
+                    f"buffer_size experiences, each gradient step {r.world_size} x batch_size" if per_rank else
+                    f"buffer_size and batch_size count all ranks' experiences: each rank collects and steps "
+                    f"on 1/{r.world_size} of them")
         return ranks
 
     def close(self) -> None:
@@ -208,6 +259,17 @@ class Ranks:
                 dist.destroy_process_group()
 
     # ------------------------------------------------------------------ a new brain
+    def settings_for(self, settings, brain: str):
+        """The settings this rank trains ``brain`` with (``split``)."""
+        return split(settings, self.world, self.per_rank, f"behaviors.{brain}")
+
+    def wire(self, trainer) -> None:
+        """With other ranks: ``trainer``'s gradients are averaged (every optimiser's ``reduce``)
+        and its advantages normalised over all ranks' buffers (``sum_across_ranks``)."""
+        for optimizer in trainer.optimizers():
+            optimizer.reduce = self.average_
+        trainer.sum_across_ranks = self.sum_
+
     def adopt(self, runner) -> None:
         """A brain this rank has just created: only rank 0 writes its files; with other ranks,
         gradients are averaged, normaliser updates wait for ``agree``, and this rank samples
@@ -216,8 +278,7 @@ class Ranks:
         if self.world == 1:
             return
         trainer = runner.trainer
-        for optimizer in trainer.optimizers():
-            optimizer.reduce = self.average_
+        self.wire(trainer)
         for normalizer in trainer.normalizers():
             normalizer.defer()
         seeds = (trainer.policy.generator.initial_seed() + RESEED * self.rank,
@@ -226,8 +287,9 @@ class Ranks:
         self._reseed(runner)
         if self.is_main:
             h = trainer.hyperparams
-            logger.info("%s: buffer_size %d and batch_size %d per rank x %d ranks: %d experiences per update, "
-                        "%d per gradient step.", runner.brain, h.buffer_size, h.batch_size, self.world,
+            logger.info("%s: %d ranks x buffer_size %d and batch_size %d each (%s): %d experiences per update, "
+                        "%d per gradient step.", runner.brain, self.world, h.buffer_size, h.batch_size,
+                        "--batch-per-rank" if self.per_rank else "the YAML's split evenly",
                         h.buffer_size * self.world, h.batch_size * self.world)
 
     def _reseed(self, runner) -> None:
@@ -371,6 +433,17 @@ class Ranks:
         else:
             self._collective(dist.all_reduce, tensor)
         flat /= np.float32(self.world)
+
+    def sum_(self, values: np.ndarray) -> np.ndarray:
+        """The sum over the ranks of ``values`` (float64; alone: ``values``)."""
+        if not self.active:
+            return values
+        import torch
+        import torch.distributed as dist
+
+        tensor = torch.from_numpy(np.array(values, dtype=np.float64)).to(self.device)
+        self._collective(dist.all_reduce, tensor)
+        return tensor.cpu().numpy()
 
     def _all_gather(self, row: np.ndarray) -> np.ndarray:
         """Every rank's ``row`` (float64, the same length on every rank) as [world, length]."""

@@ -42,6 +42,7 @@ from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
 from trainer.config.support import goal_conditioning_note
 from trainer.curriculum import EnvironmentParameterManager
+from trainer import warmup
 from trainer.distributed import RankLost, Ranks
 from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool
 from trainer.errors import ResultsWriteError, UnityCommunicatorStoppedError
@@ -106,6 +107,8 @@ class RunState:
     clips: ClipRecorder | None = None  # --record-video (trainer/artifacts/clips.py)
     start_time: float = field(default_factory=time.time)
     _last_progress: float = float("-inf")
+    stepped: bool = False  # the first actions were sent (a start-up mark: bench/startup.py)
+    updated: bool = False  # the first update was made (likewise)
 
     # ------------------------------------------------------------------ behaviors
     def ensure_runner(self, behavior_name: str, agents: int | None = None) -> BehaviorRunner:
@@ -132,7 +135,8 @@ class RunState:
             logger.warning("%s: %s", brain, note)
         ck = opts.checkpoint_settings
         seed = opts.env_settings.seed + len(self.runners)
-        runner = BehaviorRunner.create(brain, spec, settings, self.run_dir, seed,
+        # with data-parallel ranks, this rank's share of buffer_size and batch_size (trainer/distributed.py)
+        runner = BehaviorRunner.create(brain, spec, self.ranks.settings_for(settings, brain), self.run_dir, seed,
                                        opts.torch_settings.device or "cpu", training=not ck.inference,
                                        use_numpy_update=self.env_vars.numpy_update, teams=self.teams)
         if not self.ranks.is_main:
@@ -275,6 +279,9 @@ class RunState:
                 crash_points.reached("update")
                 with self.timers.scope("update"):
                     stats = runner.trainer.update(updates[brain])
+                if not self.updated:
+                    self.updated = True
+                    logger.debug("Start-up: first update done.")
                 crash_points.reached("update.done")
                 self.ranks.after_update(runner)
                 for key, value in stats.items():
@@ -407,45 +414,53 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
     # resolves --env first: a wrong path must not leave a results folder that blocks the rerun
     pool = EnvPool(pool_settings, initial_side_channel=lambda: state.initial_side_channel())
     if main:
-        run_dir = prepare_run_dir(options)
+        run_dir = prepare_run_dir(options)  # refuses before anything starts; the simulators log into it
     else:
         run_dir = run_dir_of(options)
         os.makedirs(os.path.join(run_dir, "run_logs"), exist_ok=True)  # this rank's simulators' logs
-    status_path = os.path.join(run_dir, "run_logs", "training_status.json")
-    keep_status = (ck.resume or ck.inference) and os.path.isfile(status_path)
-    status = TrainingStatus.load(status_path) if keep_status else TrainingStatus()
-    restore = {p: status.get_lesson_num(p) for p in options.environment_parameters} if ck.resume else None
-    params = EnvironmentParameterManager(options.environment_parameters, env.seed,
-                                         {k: v for k, v in (restore or {}).items() if v is not None})
-    progress = ProgressLine(sys.stderr if main else open(os.devnull, "w"))
-    timers = TimerTree(argv=sys.argv)
-    writers = []
-    if main:
-        tb = TensorboardWriter(run_dir, clear_past_data=ck.force and not ck.resume)
-        # as mlagents-learn: every summary also lands in timers.json as gauges (<Behavior>.<tag>.mean/.sum)
-        writers = [tb, ConsoleWriter(logger, progress=progress), GaugeWriter(timers)]
-        write_run_options(options, run_dir)
-    reporter = StatsReporter(writers)
-    state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
-                     make_routers(env.num_envs), env_vars, behavior_recorder(options))
-    if ck.record_video and main:
-        state.clips = ClipRecorder.for_env(env.env_path, env.seed)
+    warn_if_not_loopback(env.bind, str(DEFAULT_EDITOR_PORT) if env.env_path is None else
+                         f"{env.base_port}" + (f"-{env.base_port + env.num_envs - 1}" if env.num_envs > 1 else ""))
+    # the simulators boot from here on; meanwhile torch, the networks and the ONNX exporter are
+    # imported in the background, and this thread sets up the results folder's files and answers
+    # the handshake and the first RESET before it needs torch (docs/performance.md, "Start-up and exit")
+    pool.launch()
+    warmup.start()
+    try:
+        status_path = os.path.join(run_dir, "run_logs", "training_status.json")
+        keep_status = (ck.resume or ck.inference) and os.path.isfile(status_path)
+        status = TrainingStatus.load(status_path) if keep_status else TrainingStatus()
+        restore = {p: status.get_lesson_num(p) for p in options.environment_parameters} if ck.resume else None
+        params = EnvironmentParameterManager(options.environment_parameters, env.seed,
+                                             {k: v for k, v in (restore or {}).items() if v is not None})
+        progress = ProgressLine(sys.stderr if main else open(os.devnull, "w"))
+        timers = TimerTree(argv=sys.argv)
+        writers = []
+        if main:
+            tb = TensorboardWriter(run_dir, clear_past_data=ck.force and not ck.resume)
+            # as mlagents-learn: every summary also lands in timers.json as gauges (<Behavior>.<tag>.mean/.sum)
+            writers = [tb, ConsoleWriter(logger, progress=progress), GaugeWriter(timers)]
+            write_run_options(options, run_dir)
+        reporter = StatsReporter(writers)
+        state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
+                         make_routers(env.num_envs), env_vars, behavior_recorder(options))
+        if ck.record_video and main:
+            state.clips = ClipRecorder.for_env(env.env_path, env.seed)
+    except BaseException:
+        pool.close()
+        raise
     for line in params.describe():
         logger.info(line)
     stopped = write_failed = False
-    warn_if_not_loopback(env.bind, str(DEFAULT_EDITOR_PORT) if env.env_path is None else
-                         f"{env.base_port}" + (f"-{env.base_port + env.num_envs - 1}" if env.num_envs > 1 else ""))
     try:
-        pool.launch()
-        # while the simulators boot: import torch and the networks (seconds, on a small machine)
-        configure_torch_threads(env_vars.torch_threads)
-        check_torch_device(options.torch_settings.device)
-        state.ranks = Ranks.start(env_vars, options.torch_settings.device)
-        import trainer.behavior  # noqa: F401
         STOP.check()
         pool.connect()
         with timers.scope("env.reset"):
             results = pool.reset(state.initial_side_channel())
+        configure_torch_threads(env_vars.torch_threads)  # waits for the background import of torch
+        check_torch_device(options.torch_settings.device)
+        state.ranks = Ranks.start(env_vars, options.torch_settings.device, options.batch_per_rank)
+        import trainer.behavior  # noqa: F401
+        logger.debug("Start-up: torch and the trainer's modules imported.")
         while True:
             STOP.check()  # stop signals take effect here, between steps (trainer.stop)
             state.recorder.observe(results)
@@ -458,6 +473,9 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
                 break
             with timers.scope("env.send"):
                 pool.send_step(actions, state.drain_side_channels())
+            if not state.stepped:
+                state.stepped = True
+                logger.debug("Start-up: first actions sent.")
             # the simulators step now; meanwhile: experience, PPO, summaries
             with timers.scope("record"):
                 state.record(decided, trajectories)

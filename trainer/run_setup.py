@@ -9,6 +9,7 @@ import os
 
 from trainer.artifacts.behaviors import BehaviorRecorder
 from trainer.config.env_vars import EnvVars
+from trainer.distributed import check_split
 from trainer.envs.pool import PoolSettings
 from trainer.errors import ConfigError, UserError
 from trainer.results_dir import run_dir_of
@@ -77,6 +78,7 @@ def pool_settings_of(options, env_vars: EnvVars) -> PoolSettings:
     if world > 1 and any(s is not None and s.self_play is not None for s in configured):
         raise UserError(f"{world} data-parallel ranks cannot share one self-play schedule; run a config with "
                         "self_play as one rank (srun -n 1, or without torchrun).")
+    check_split(options, world)  # buffer_size and batch_size each rank can take (exit 2 before anything starts)
     return PoolSettings(
         env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
         num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,

@@ -48,7 +48,10 @@ HOSTILE_SIM = Path(__file__).with_name("hostile_sim.py")
 
 
 def run_trainer(tmp_path, env_no_proxy, case: str, after: int = 0, max_steps: int = 100000,
-                timeout_wait: int = 20, extra: tuple = ()) -> subprocess.CompletedProcess:
+                timeout_wait: int = 60, extra: tuple = ()) -> subprocess.CompletedProcess:
+    # --timeout-wait also bounds the simulator's boot (as in mlagents-learn): since torch is
+    # imported while the simulator boots (trainer/warmup.py) the import no longer adds to that
+    # budget, and on a loaded machine a 20 s budget was too short for this script to start
     game = tmp_path / "Hostile.x86_64"
     # by path, not ``-m tests...``: a fresh clone's venv has the project packages but not ``tests``
     game.write_text(f"#!/bin/sh\nexec {sys.executable} {HOSTILE_SIM} \"$@\"\n")

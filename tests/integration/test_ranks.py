@@ -5,7 +5,9 @@ both at the same exchange; a rank that dies ends the run with rank 0's final che
 (tests/slurm/test_ranks.py runs the same under srun, on one node and on two.)"""
 from __future__ import annotations
 
+import multiprocessing
 import os
+import queue
 import re
 import signal
 import subprocess
@@ -13,6 +15,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+import pytest
 import torch
 
 from tests.integration.conftest import free_port_block
@@ -91,7 +95,9 @@ def test_torchrun_two_ranks_train_one_policy_bit_identically(tmp_path, env_no_pr
     assert len(rank0) >= 4 and rank0 == Path(f"{weights}.rank1").read_text().splitlines()
     counts = [int(n) for n in re.findall(r"rank 0: (\d+), rank 1: (\d+)", text)[-1]]
     assert min(counts) >= 400 and sum(counts) >= 1500  # both ranks' experience counted
-    assert "buffer_size 128 and batch_size 32 per rank x 2 ranks: 256 experiences per update" in text
+    # the YAML's buffer_size 128 and batch_size 32 are the two ranks' together
+    assert "Basic: 2 ranks x buffer_size 64 and batch_size 16 each (the YAML's split evenly): 128 experiences " \
+           "per update, 32 per gradient step." in text
     results = tmp_path / "results" / "ranks"
     assert (results / "Basic.onnx").is_file() and _step_of(results / "Basic" / "checkpoint.pt") >= 1500
     # rank 1's simulator is worker 1: its own port, seed and log
@@ -150,3 +156,110 @@ def test_self_play_under_two_ranks_is_one_message_and_exit_2(tmp_path, env_no_pr
     assert r.returncode == 2, r.stderr[-2000:]
     assert "cannot share one self-play schedule" in r.stderr and "Traceback" not in r.stderr, r.stderr[-2000:]
     assert not (tmp_path / "results" / "sp").exists()
+
+
+# ------------------------------------------------------------------ one YAML, any number of ranks
+UPDATE_ROWS = 220  # the buffer of the single process; each of 2 ranks holds half of it
+
+
+def _update_weights(rank: int, world: int, port: int, numpy_update: bool, out) -> None:
+    """One PPO update (3 epochs of one minibatch, batch_size = buffer_size = UPDATE_ROWS in the
+    YAML) on this rank's share of the same experiences; its flat weights into ``out``."""
+    import torch.distributed as dist
+
+    from protos.types import ActionSpec, BehaviorSpec
+    from tests.unit.test_ppo_numpy_update import feed, vec
+    from trainer.config.settings import NetworkSettings, PPOSettings, TrainerSettings
+    from trainer.distributed import Ranks
+    from trainer.ppo.hyperparams import PPOHyperparams
+    from trainer.ppo.trainer import PPOTrainer
+
+    torch.set_num_threads(1)
+    settings = TrainerSettings(
+        hyperparameters=PPOSettings(batch_size=UPDATE_ROWS, buffer_size=UPDATE_ROWS, learning_rate=3e-3,
+                                    num_epoch=3, beta=5e-3),
+        network_settings=NetworkSettings(normalize=True, hidden_units=24, num_layers=2))
+    ranks = Ranks(rank=rank, world=world, backend="gloo" if world > 1 else None)
+    if world > 1:
+        dist.init_process_group("gloo", init_method=f"tcp://127.0.0.1:{port}", rank=rank, world_size=world)
+    mine = ranks.settings_for(settings, "B")
+    share = UPDATE_ROWS // world
+    assert (mine.hyperparameters.batch_size, mine.hyperparameters.buffer_size) == (share, share)
+    spec = BehaviorSpec((vec(5), vec(3, "w")), ActionSpec(2, (4,)))
+    trainer = PPOTrainer("B", spec, PPOHyperparams.from_settings(mine), seed=5, use_numpy_update=numpy_update)
+    feed([trainer], True, (70, 90, 60), done=lambda k, length: length == 90)  # the same 220 rows everywhere
+    data = trainer.buffer.concatenated()
+    trainer.buffer.clear()
+    trainer.buffer.append({key: value[rank * share:(rank + 1) * share] for key, value in data.items()})
+    before = torch.cat([p.detach().flatten().clone() for p in trainer.optimizer.params])
+    if world > 1:
+        ranks.wire(trainer)
+    trainer.update(rows=share)
+    after = torch.cat([p.detach().flatten() for p in trainer.optimizer.params])
+    out.put((rank, before.numpy(), after.numpy()))
+    if world > 1:
+        dist.destroy_process_group()
+
+
+def _updates(world: int, numpy_update: bool) -> list[tuple[np.ndarray, np.ndarray]]:
+    context = multiprocessing.get_context("spawn")
+    out = context.Queue()
+    port = free_port_block(1)
+    procs = [context.Process(target=_update_weights, args=(rank, world, port, numpy_update, out))
+             for rank in range(world)]
+    for p in procs:
+        p.start()
+    got = {}
+    deadline = time.monotonic() + 240
+    while len(got) < world:  # a rank that dies (an import error, say) fails the test now, not at the deadline
+        try:
+            rank, before, after = out.get(timeout=1)
+            got[rank] = (before, after)
+        except queue.Empty:
+            dead = [p.exitcode for p in procs if p.exitcode not in (None, 0)]
+            assert not dead and time.monotonic() < deadline, f"rank processes exited with {dead} or hung"
+    for p in procs:
+        p.join(timeout=60)
+        assert p.exitcode == 0
+    return [got[rank] for rank in range(world)]
+
+
+@pytest.mark.parametrize("numpy_update", [True, False], ids=["numpy-update", "torch-update"])
+def test_the_same_data_in_one_and_two_ranks_gives_the_same_update(numpy_update):
+    """buffer_size and batch_size are global: 2 gloo ranks holding half the experiences each
+    (minibatches of batch_size / 2, gradients averaged, advantages normalised over both buffers)
+    make the update one process makes on all of them, to 1e-6."""
+    (before, alone), = _updates(1, numpy_update)
+    (before0, rank0), (before1, rank1) = _updates(2, numpy_update)
+    np.testing.assert_array_equal(before0, before)  # the same start everywhere
+    np.testing.assert_array_equal(before1, before)
+    np.testing.assert_array_equal(rank0, rank1)  # the ranks stay bit-identical
+    assert np.abs(alone - before).max() > 1e-3  # the update moved the weights: 1e-6 means something
+    np.testing.assert_allclose(rank0, alone, rtol=0, atol=1e-6)
+
+
+def test_a_batch_the_ranks_cannot_share_is_one_message_and_exit_2(tmp_path, env_no_proxy):
+    """batch_size 30 does not split over 4 ranks: refused at start, before a simulator or a
+    results folder exists, with the nearest values that do and the per-rank flag."""
+    cfg = tmp_path / "odd.yaml"
+    cfg.write_text(BASIC.format(max_steps=100).replace("batch_size: 32", "batch_size: 30"))
+    args = [str(cfg), "--env", "stub:basic", "--run-id", "odd", "--results-dir", str(tmp_path / "results"),
+            "--base-port", str(free_port_block(2))]
+    env = {**_env(env_no_proxy), "RANK": "0", "WORLD_SIZE": "4", "MASTER_ADDR": "127.0.0.1",
+           "MASTER_PORT": str(free_port_block(1))}
+    r = subprocess.run([sys.executable, "-m", "trainer.cli", *args], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=120, env=env)
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert ("behaviors.Basic.hyperparameters.batch_size is 30: with 4 data-parallel ranks it must be a multiple "
+            "of 4") in r.stderr and "Use 28 or 32, or --batch-per-rank" in r.stderr, r.stderr[-2000:]
+    assert "Traceback" not in r.stderr
+    assert not (tmp_path / "results" / "odd").exists()
+    # --batch-per-rank: each rank takes the YAML's values as they are; the same YAML passes the check
+    from trainer.config.cli_args import parse_run_options
+    from trainer.distributed import check_split, split
+
+    options = parse_run_options([str(cfg), "--batch-per-rank"])
+    check_split(options, 4)
+    assert split(options.behaviors["Basic"], 4, options.batch_per_rank).hyperparameters.batch_size == 30
+    halves = split(options.behaviors["Basic"], 2, False).hyperparameters
+    assert (halves.batch_size, halves.buffer_size) == (15, 64)

@@ -53,9 +53,13 @@ def run_two_ranks(cluster, tmp_path: Path, *sbatch_args: str) -> tuple[str, Path
 
 def check_ranks(text: str, weights: Path, results: Path) -> None:
     assert "srun --kill-on-bad-exit=0" in text
+    # the YAML's buffer_size and batch_size are both ranks' together: rank 0 prints the split
+    assert (f"Basic: 2 ranks x buffer_size {BUFFER // 2} and batch_size 16 each (the YAML's split evenly): "
+            f"{BUFFER} experiences per update, 32 per gradient step.") in text, text[-3000:]
     rank0, rank1 = hashes(Path(f"{weights}.rank0")), hashes(Path(f"{weights}.rank1"))
-    # every update of 2 x (> 128) experiences, up to 2000 steps: at least 5 of them
-    assert len(rank0) >= 5
+    # every update of 2 x (> 64) experiences, as one process's of > 128, up to 2000 steps:
+    # at least 10 of them (with buffer_size per rank it was half as many)
+    assert len(rank0) >= 10
     assert rank0 == rank1  # brain, update number, step, sha256 of the weights: bit for bit
     assert len({h[3] for h in rank0}) == len(rank0)  # the weights changed at every update
     per_rank = [int(n) for n in re.findall(r"experiences per rank since start: rank 0: (\d+), rank 1: (\d+)",

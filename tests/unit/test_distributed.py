@@ -176,3 +176,31 @@ def test_alone_every_call_is_the_single_process_rule():
     full.done = True
     assert ranks.agree({"A": ready, "B": full}) == {"A": None}
     assert trainer.optimizer.reduce is None and all(n.pending is None for n in trainer.normalizers())
+
+
+# ------------------------------------------------------------------ the split of buffer_size and batch_size
+def test_the_split_divides_buffer_batch_and_cloning_batch_and_refuses_what_does_not_divide():
+    from trainer.config.settings import (BehavioralCloningSettings, MemorySettings, NetworkSettings, PPOSettings,
+                                         TrainerSettings)
+    from trainer.distributed import split
+
+    settings = TrainerSettings(hyperparameters=PPOSettings(batch_size=96, buffer_size=960),
+                               behavioral_cloning=BehavioralCloningSettings(demo_path="d.demo", batch_size=64))
+    three = split(settings, 3, False)
+    assert (three.hyperparameters.batch_size, three.hyperparameters.buffer_size) == (32, 320)
+    assert three.behavioral_cloning.batch_size == 21
+    assert three.max_steps == settings.max_steps and three.summary_freq == settings.summary_freq  # global
+    assert split(settings, 1, False) is settings and split(settings, 3, True) is settings  # alone, per rank
+    with pytest.raises(ConfigError, match=r"behaviors\.B\.hyperparameters\.batch_size is 96: with 5 data-parallel "
+                                          r"ranks it must be a multiple of 5 .* Use 95 or 100, or --batch-per-rank"):
+        split(settings, 5, False, "behaviors.B")
+    with pytest.raises(ConfigError, match=r"buffer_size is 960: with 7 .* Use 959 or 966"):
+        split(settings, 7, False)
+    tiny = TrainerSettings(hyperparameters=PPOSettings(batch_size=1, buffer_size=8))
+    with pytest.raises(ConfigError, match=r"batch_size is 1: with 2 .* Use 2, or --batch-per-rank"):
+        split(tiny, 2, False)
+    lstm = TrainerSettings(hyperparameters=PPOSettings(batch_size=64, buffer_size=640),
+                           network_settings=NetworkSettings(memory=MemorySettings(sequence_length=64)))
+    with pytest.raises(ConfigError, match=r"64 / 2 ranks = 32 is shorter than network_settings\.memory\."
+                                          r"sequence_length 64.* at least 128"):
+        split(lstm, 2, False)

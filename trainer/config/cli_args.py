@@ -122,6 +122,8 @@ def _add_general_flags(parser: argparse.ArgumentParser) -> None:
                   "its ONNX to <Behavior>-<step>.mp4 beside it and into TensorBoard (Images)")
     _setting_flag(parser, env, "timeout_wait", "seconds to wait for each simulator message")
     _setting_flag(parser, env, "bind", "address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")
+    _setting_flag(parser, RunOptions, "batch_per_rank", "data-parallel ranks: buffer_size and batch_size are each "
+                  "rank's, not all ranks' together (the default; docs/cluster.md)")
     mirror = parser.add_argument_group(title="Behavior specs (docs/mirror.md)")
     _setting_flag(mirror, RunOptions, "capture_spec", "connect to --env, record its behavior specs to FILE after "
                   "the first steps and exit without training", metavar="FILE")
@@ -210,6 +212,7 @@ def parse_run_options(argv: Sequence[str]) -> RunOptions:
     options = dataclasses.replace(options, checkpoint_settings=checkpoint, env_settings=env,
                                   check=values["check"], spec_path=values["spec_path"],
                                   capture_spec=values["capture_spec"],
-                                  max_steps_override=values["max_steps_override"])
+                                  max_steps_override=values["max_steps_override"],
+                                  batch_per_rank=values["batch_per_rank"])
     check_run_options(options)
     return options

@@ -273,6 +273,9 @@ class RunOptions:
     #: the file was an ML-Agents 0.x one: its max_steps and summary_freq count environment steps of
     #: one simulator, and become agent steps once the behavior's agents are counted (docs/configuration.md)
     legacy_env_steps: bool = False
+    #: --batch-per-rank: with K data-parallel ranks, buffer_size and batch_size count ONE rank's
+    #: experiences (K times the YAML's per update) instead of all ranks' (docs/cluster.md)
+    batch_per_rank: bool = False
 
     def behavior_settings(self, brain_name: str, agents: int | None = None) -> TrainerSettings:
         """The settings for ``brain_name`` (no ``?team=``), with init_path resolved for

@@ -43,9 +43,17 @@ def _next_obs_key(index: int) -> str:
     return f"next_obs_{index}"
 
 
-def normalize_advantages(advantages: np.ndarray) -> np.ndarray:
-    """(A - mean) / (std + 1e-10) over the whole buffer. float [N] -> float32 [N]."""
-    return ((advantages - advantages.mean()) / (advantages.std() + ADVANTAGE_STD_EPSILON)).astype(np.float32)
+def normalize_advantages(advantages: np.ndarray, sum_across_ranks=None) -> np.ndarray:
+    """(A - mean) / (std + 1e-10) over the whole buffer. float [N] -> float32 [N].
+    ``sum_across_ranks``: data-parallel ranks (trainer/distributed.py) sum (N, sum A, sum A^2)
+    over their buffers, so that every rank uses the mean and std of all of them."""
+    if sum_across_ranks is None:
+        return ((advantages - advantages.mean()) / (advantages.std() + ADVANTAGE_STD_EPSILON)).astype(np.float32)
+    a = np.asarray(advantages, dtype=np.float64)
+    n, total, squares = sum_across_ranks(np.array([a.size, a.sum(), np.square(a).sum()]))
+    mean = total / n
+    std = np.sqrt(max(squares / n - mean * mean, 0.0))
+    return ((a - mean) / (std + ADVANTAGE_STD_EPSILON)).astype(np.float32)
 
 
 class PPOTrainer(Trainer):
@@ -95,6 +103,9 @@ class PPOTrainer(Trainer):
             and self.device.type == "cpu") else None
         self._numpy_ppo: numpy_update.NumpyPPO | None = None  # built at the first numpy update
         self._rows: int | None = None  # ``update``'s rows
+        # data-parallel ranks (trainer/distributed.py ``Ranks.wire``): sums a float64 vector over
+        # the ranks, for the advantages' mean and std over all ranks' buffers; None alone
+        self.sum_across_ranks = None
         # behavioral_cloning (trainer/behavioral_cloning.py), set by behavior.make_trainer: one round
         # of cloning after each PPO update
         self.behavioral_cloning = None
@@ -264,7 +275,7 @@ class PPOTrainer(Trainer):
 
     def _buffer_tensors(self) -> dict[str, Any]:
         data = self.buffer.concatenated()
-        data["advantages"] = normalize_advantages(data["advantages"])
+        data["advantages"] = normalize_advantages(data["advantages"], self.sum_across_ranks)
         tensors = {key: torch.as_tensor(value, device=self.device) for key, value in data.items()}
         tensors["allowed"] = (~tensors.pop("action_masks")).float()
         return tensors
@@ -373,7 +384,7 @@ class PPOTrainer(Trainer):
                       collected: dict[str, list[float]]) -> None:
         """The same minibatches (same shuffles) as the torch path, stepped by NumpyPPO."""
         data = self.buffer.concatenated()
-        data["advantages"] = normalize_advantages(data["advantages"]).astype(np.float32)
+        data["advantages"] = normalize_advantages(data["advantages"], self.sum_across_ranks)
         masks = data.pop("action_masks")
         if self.behavior_spec.action_spec.discrete_branches:
             data["allowed"] = (~masks).astype(np.float32)
