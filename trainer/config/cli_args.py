@@ -66,6 +66,30 @@ class _Removed(argparse.Action):
         logger.warning("The command line argument %s was removed.", option_string)
 
 
+class _ShippedFiles(argparse.Action):
+    """``--list-configs``, ``--copy-configs DIR``, ``--write-slurm-template DIR``: print or copy
+    files the package ships (trainer/shipped: what a pip user has instead of the checkout's
+    configs/ and docker/slurm/), then exit as ``--help`` does, without training."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        from pathlib import Path
+
+        from trainer import shipped
+
+        try:
+            if self.dest == "list_configs":
+                lines = [str(path) for path in shipped.config_paths()]
+            elif self.dest == "copy_configs":
+                lines = [f"wrote {path}" for path in shipped.copy_configs(values)]
+            else:
+                lines = [f"wrote {path}" for path in shipped.write_slurm_template(values)]
+                lines.append(shipped.slurm_usage(Path(values)))
+        except OSError as err:
+            parser.exit(2, f"{parser.prog}: error: {option_string}: {err}\n")
+        print("\n".join(lines))
+        parser.exit(0)
+
+
 def _add_general_flags(parser: argparse.ArgumentParser) -> None:
     add = parser.add_argument
     add("trainer_config_path", nargs="?", default=None, help="ML-Agents trainer YAML (optional)")
@@ -100,6 +124,12 @@ def _add_general_flags(parser: argparse.ArgumentParser) -> None:
     add("--timeout-wait", type=int, default=60, action=_Store, help="seconds to wait for each simulator message")
     add("--bind", default="127.0.0.1", action=_Store,
         help="address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")
+    shipped = parser.add_argument_group(title="Files the package ships (without a checkout of the repository)")
+    shipped.add_argument("--list-configs", nargs=0, action=_ShippedFiles, help="print the paths of the example configs, then exit")
+    shipped.add_argument("--copy-configs", metavar="DIR", action=_ShippedFiles,
+                         help="copy the example configs into DIR, then exit")
+    shipped.add_argument("--write-slurm-template", metavar="DIR", action=_ShippedFiles,
+                         help="write the Slurm job template (train.sbatch, sweep.sh, sweep.py) into DIR, then exit")
     mirror = parser.add_argument_group(title="Behavior specs (docs/mirror.md)")
     mirror.add_argument("--capture-spec", metavar="FILE", default=None, action=_Store,
                         help="connect to --env, record its behavior specs to FILE after the first steps "
