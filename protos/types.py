@@ -1,8 +1,10 @@
 """The data model every room of the trainer speaks: behavior specs and per-step agent data.
 
-These mirror the names ML-Agents users know from ``mlagents_envs.base_env`` (BehaviorSpec,
-DecisionSteps, TerminalSteps, ActionTuple) so a newcomer can map one onto the other, but they
-are plain frozen dataclasses over numpy arrays, built once per message by the codec.
+These are the types of ``mlagents_envs.base_env`` (BehaviorSpec, ActionSpec, DecisionSteps,
+TerminalSteps, ActionTuple), with its names and behaviour (DecisionSteps and TerminalSteps are
+read-only mappings from agent id to one agent's step): the trainer, the stub and the
+``mlagents_like_envs`` API share this one data model. Steps are frozen dataclasses over numpy
+arrays, built once per message by the codec.
 
 Shapes (n = number of agents in the batch):
   DecisionSteps.obs[i]        float32 [n, *observation_specs[i].shape]
@@ -18,8 +20,10 @@ Shapes (n = number of agents in the batch):
 from __future__ import annotations
 
 import enum
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Iterator, NamedTuple
 
 import numpy as np
 
@@ -50,35 +54,149 @@ class ObservationSpec(NamedTuple):
     name: str
 
 
-@dataclass(frozen=True)
-class ActionSpec:
+class ActionTuple:
+    """Actions of n agents: ``continuous`` float32 [n, c] and ``discrete`` int32 [n, b].
+
+    Either part may be given later (``add_continuous`` / ``add_discrete``, as in mlagents_envs);
+    the part not given is then an [n, 0] array. Other dtypes are converted on the way in."""
+
+    __slots__ = ("_continuous", "_discrete")
+    discrete_dtype = np.int32
+
+    def __init__(self, continuous: np.ndarray | None = None, discrete: np.ndarray | None = None) -> None:
+        self._continuous: np.ndarray | None = None
+        self._discrete: np.ndarray | None = None
+        if continuous is not None:
+            self.add_continuous(continuous)
+        if discrete is not None:
+            self.add_discrete(discrete)
+
+    @property
+    def continuous(self) -> np.ndarray | None:
+        return self._continuous
+
+    @property
+    def discrete(self) -> np.ndarray | None:
+        return self._discrete
+
+    def add_continuous(self, continuous: np.ndarray) -> None:
+        continuous = np.asarray(continuous)
+        if continuous.dtype != np.float32:
+            continuous = continuous.astype(np.float32)
+        if self._discrete is None:
+            self._discrete = np.zeros((len(continuous), 0), dtype=np.int32)
+        self._continuous = continuous
+
+    def add_discrete(self, discrete: np.ndarray) -> None:
+        discrete = np.asarray(discrete)
+        if discrete.dtype != np.int32:
+            discrete = discrete.astype(np.int32)
+        if self._continuous is None:
+            self._continuous = np.zeros((len(discrete), 0), dtype=np.float32)
+        self._discrete = discrete
+
+    def __repr__(self) -> str:
+        return f"ActionTuple(continuous={self._continuous!r}, discrete={self._discrete!r})"
+
+
+class ActionSpec(NamedTuple):
     continuous_size: int
     discrete_branches: tuple[int, ...]
+
+    def __str__(self) -> str:
+        return f"Continuous: {self.continuous_size}, Discrete: {self.discrete_branches}"
 
     @property
     def discrete_size(self) -> int:
         return len(self.discrete_branches)
 
-    def empty_action(self, n: int) -> "ActionTuple":
+    def is_discrete(self) -> bool:
+        """Only discrete actions (an older API's question, kept for ported scripts)."""
+        return self.discrete_size > 0 and self.continuous_size == 0
+
+    def is_continuous(self) -> bool:
+        """Only continuous actions."""
+        return self.discrete_size == 0 and self.continuous_size > 0
+
+    def empty_action(self, n_agents: int) -> ActionTuple:
+        """All-zero actions for ``n_agents`` agents."""
         return ActionTuple(
-            np.zeros((n, self.continuous_size), dtype=np.float32),
-            np.zeros((n, self.discrete_size), dtype=np.int32),
+            np.zeros((n_agents, self.continuous_size), dtype=np.float32),
+            np.zeros((n_agents, self.discrete_size), dtype=np.int32),
         )
 
+    def random_action(self, n_agents: int) -> ActionTuple:
+        """Uniform actions from numpy's global generator: continuous in [-1, 1), each discrete
+        branch uniform over its options (so ``np.random.seed`` makes them repeatable)."""
+        continuous = np.random.uniform(-1.0, 1.0, size=(n_agents, self.continuous_size))
+        discrete = np.zeros((n_agents, self.discrete_size), dtype=np.int32)
+        for branch, size in enumerate(self.discrete_branches):
+            discrete[:, branch] = np.random.randint(0, size, size=n_agents, dtype=np.int32)
+        return ActionTuple(continuous, discrete)
 
-@dataclass(frozen=True)
-class BehaviorSpec:
+    @staticmethod
+    def create_continuous(continuous_size: int) -> "ActionSpec":
+        return ActionSpec(continuous_size, ())
+
+    @staticmethod
+    def create_discrete(discrete_branches: tuple[int, ...]) -> "ActionSpec":
+        return ActionSpec(0, tuple(discrete_branches))
+
+    @staticmethod
+    def create_hybrid(continuous_size: int, discrete_branches: tuple[int, ...]) -> "ActionSpec":
+        return ActionSpec(continuous_size, tuple(discrete_branches))
+
+
+class BehaviorSpec(NamedTuple):
     observation_specs: tuple[ObservationSpec, ...]
     action_spec: ActionSpec
 
 
-class ActionTuple(NamedTuple):
-    continuous: np.ndarray  # float32 [n, continuous_size]
-    discrete: np.ndarray  # int32 [n, num_branches]
+class _ByAgentId(Mapping):
+    """Read access by agent id (``steps[agent_id]``, ``agent_id in steps``, iteration over the
+    ids) on top of the batched arrays; the id → row index is built on first use."""
+
+    @functools.cached_property
+    def agent_id_to_index(self) -> dict[int, int]:
+        return {agent: row for row, agent in enumerate(self.agent_id.tolist())}
+
+    def _row(self, agent_id: int) -> int:
+        try:
+            return self.agent_id_to_index[agent_id]
+        except (KeyError, TypeError):
+            raise KeyError(f"agent_id {agent_id} is not present in the {type(self).__name__}") from None
+
+    def __len__(self) -> int:
+        return len(self.agent_id)
+
+    def __iter__(self) -> Iterator[int]:
+        yield from self.agent_id
 
 
-@dataclass(frozen=True)
-class DecisionSteps:
+class DecisionStep(NamedTuple):
+    """One agent's row of a DecisionSteps."""
+
+    obs: list[np.ndarray]
+    reward: float
+    agent_id: int
+    action_mask: list[np.ndarray] | None
+    group_id: int
+    group_reward: float
+
+
+class TerminalStep(NamedTuple):
+    """One agent's row of a TerminalSteps."""
+
+    obs: list[np.ndarray]
+    reward: float
+    interrupted: bool
+    agent_id: int
+    group_id: int
+    group_reward: float
+
+
+@dataclass(frozen=True, eq=False)
+class DecisionSteps(_ByAgentId):
     obs: list[np.ndarray]
     reward: np.ndarray
     agent_id: np.ndarray
@@ -86,8 +204,16 @@ class DecisionSteps:
     group_id: np.ndarray
     group_reward: np.ndarray
 
-    def __len__(self) -> int:
-        return len(self.agent_id)
+    def __getitem__(self, agent_id: int) -> DecisionStep:
+        row = self._row(agent_id)
+        return DecisionStep(
+            obs=[o[row] for o in self.obs],
+            reward=self.reward[row],
+            agent_id=agent_id,
+            action_mask=None if self.action_mask is None else [m[row] for m in self.action_mask],
+            group_id=self.group_id[row],
+            group_reward=self.group_reward[row],
+        )
 
     @staticmethod
     def empty(spec: BehaviorSpec) -> "DecisionSteps":
@@ -101,8 +227,8 @@ class DecisionSteps:
         )
 
 
-@dataclass(frozen=True)
-class TerminalSteps:
+@dataclass(frozen=True, eq=False)
+class TerminalSteps(_ByAgentId):
     obs: list[np.ndarray]
     reward: np.ndarray
     interrupted: np.ndarray
@@ -110,8 +236,16 @@ class TerminalSteps:
     group_id: np.ndarray
     group_reward: np.ndarray
 
-    def __len__(self) -> int:
-        return len(self.agent_id)
+    def __getitem__(self, agent_id: int) -> TerminalStep:
+        row = self._row(agent_id)
+        return TerminalStep(
+            obs=[o[row] for o in self.obs],
+            reward=self.reward[row],
+            interrupted=self.interrupted[row],
+            agent_id=agent_id,
+            group_id=self.group_id[row],
+            group_reward=self.group_reward[row],
+        )
 
     @staticmethod
     def empty(spec: BehaviorSpec) -> "TerminalSteps":

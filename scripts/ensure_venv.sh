@@ -27,10 +27,10 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   echo "$want" > "$stamp"
 else
   # cheap re-link of the editable install in case the tree moved
-  "$venv/bin/python" -c "import trainer, unity_stub_env, protos" 2>/dev/null \
+  "$venv/bin/python" -c "import trainer, unity_stub_env, protos, mlagents_like_envs" 2>/dev/null \
     || "$venv/bin/python" -m pip install -q --no-deps -e .
 fi
 # Byte-compile the project's own modules (pip compiles installed wheels, not an editable tree):
 # where PYTHONDONTWRITEBYTECODE is set, as on this project's CI machines, every process would
 # otherwise recompile them from source on import (measured: +0.2 s per trainer start).
-"$venv/bin/python" -m compileall -q trainer unity_stub_env protos >/dev/null
+"$venv/bin/python" -m compileall -q trainer unity_stub_env protos mlagents_like_envs >/dev/null

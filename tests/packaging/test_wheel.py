@@ -1,7 +1,7 @@
 """The wheel works without the checkout: what a user who runs ``pip install mlagents-like`` gets.
 
 The wheel is built from a copy of exactly the files the Dockerfile copies (pyproject.toml,
-README.md, the three packages, configs/ and docker/slurm/, which trainer/shipped/ links to), so
+README.md, the four packages, configs/ and docker/slurm/, which trainer/shipped/ links to), so
 nothing else of the checkout can leak into it. It is installed into a new venv in a temporary
 folder (no system site-packages). Its third-party dependencies are not downloaded again (torch alone
 is 0.7-4.7 GB): the new venv reads them from this test venv's site-packages through one .pth line,
@@ -27,7 +27,8 @@ import pytest
 from tests.integration.conftest import free_port_block
 
 ROOT = Path(__file__).resolve().parents[2]
-WHEEL_SOURCES = ("pyproject.toml", "README.md", "trainer", "unity_stub_env", "protos", "configs", "docker/slurm")
+WHEEL_SOURCES = ("pyproject.toml", "README.md", "trainer", "unity_stub_env", "protos", "mlagents_like_envs", "configs",
+                 "docker/slurm")
 
 pytestmark = pytest.mark.wheel
 
@@ -48,8 +49,8 @@ for line in dist.requires or []:
         continue
     if not req.specifier.contains(have, prereleases=True):
         unmet.append(f"{req} (have {have})")
-import trainer, unity_stub_env
-print(json.dumps({"unmet": unmet, "version": dist.version, "requires_python": dist.metadata["Requires-Python"],
+import trainer, unity_stub_env, mlagents_like_envs.environment
+print(json.dumps({"envs": mlagents_like_envs.__file__, "unmet": unmet, "version": dist.version, "requires_python": dist.metadata["Requires-Python"],
                   "classifiers": dist.metadata.get_all("Classifier"),
                   "trainer": trainer.__file__, "unity_stub_env": unity_stub_env.__file__,
                   "trainer_version": trainer.__version__}))
@@ -98,7 +99,7 @@ def test_wheel_installs_and_trains_without_the_checkout(tmp_path):
     work.mkdir()
     facts = json.loads(run([python, "-c", CHECK_REQUIREMENTS], cwd=work, env=env).stdout)
     assert facts["unmet"] == []
-    assert Path(facts["trainer"]).is_relative_to(venv) and Path(facts["unity_stub_env"]).is_relative_to(venv)
+    assert all(Path(facts[name]).is_relative_to(venv) for name in ("trainer", "unity_stub_env", "envs"))
     assert facts["version"] == facts["trainer_version"]
     assert facts["requires_python"] == ">=3.10"
     assert {f"Programming Language :: Python :: 3.{minor}" for minor in (10, 11, 12, 13)} <= set(facts["classifiers"])

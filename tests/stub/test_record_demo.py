@@ -99,7 +99,7 @@ def test_cli_refuses_bad_arguments_with_exit_code_2(tmp_path, args, message):
 
 def test_mimic_inverse_action_map_round_trips_hand_computed_targets():
     from unity_stub_env.tasks.mimic import MimicTask
-    from unity_stub_env.tasks.mimic_motions import JOINTS
+    from unity_stub_env.tasks.mimic.motions import JOINTS
 
     task = MimicTask(1, 0)
     knee, hip_x, elbow = JOINTS.index("knee_r"), JOINTS.index("hip_x_r"), JOINTS.index("elbow_l")

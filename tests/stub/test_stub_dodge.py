@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from unity_stub_env.cli import main
+from unity_stub_env.geometry import euler_to_quat
 from unity_stub_env.tasks import TASKS, make_task
 from unity_stub_env.tasks.dodge import (
     CROUCH_RATE,
@@ -19,7 +20,6 @@ from unity_stub_env.tasks.dodge import (
     XML_PATH,
     Throws,
     effort,
-    euler_to_quat,
 )
 
 N = 14

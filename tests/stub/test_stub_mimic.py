@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from unity_stub_env.cli import main
+from unity_stub_env.geometry import cross, quat_angle, quat_matrix, quat_mul
 from unity_stub_env.tasks import TASKS, make_task
 from unity_stub_env.tasks.base import EnvironmentParameters
 from unity_stub_env.tasks.mimic import (
@@ -18,14 +19,10 @@ from unity_stub_env.tasks.mimic import (
     XML_PATH,
     BalanceExpert,
     MimicTask,
-    cross,
-    quat_angle,
-    quat_matrix,
-    quat_mul,
     reward_terms,
     run_trials,
 )
-from unity_stub_env.tasks.mimic_motions import JOINTS, MOTIONS, RATE, _soles, load_motion
+from unity_stub_env.tasks.mimic.motions import JOINTS, MOTIONS, RATE, _soles, load_motion
 
 N = 8
 NO_DISCRETE = np.zeros((N, 0))

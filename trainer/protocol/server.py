@@ -390,7 +390,8 @@ class UnityEndpoint:
             if name not in full_actions and n_deciding > 0:
                 full_actions[name] = self.behavior_specs[name].action_spec.empty_action(n_deciding)
         for name, action in full_actions.items():
-            rows = {len(p) for p in action if p is not None and getattr(p, "size", 1) > 0}
+            rows = {len(p) for p in (action.continuous, action.discrete)
+                    if p is not None and getattr(p, "size", 1) > 0}
             if rows and rows != {self._deciding.get(name, 0)}:
                 raise ValueError(
                     f"{name}: {rows.pop()} action rows for {self._deciding.get(name, 0)} deciding agents"

@@ -71,6 +71,7 @@ from protos.types import (
 )
 from unity_stub_env.creatures import generate, mjcf
 from unity_stub_env.creatures.skeleton import Skeleton
+from unity_stub_env.geometry import matrix_quat
 from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
 
 KINDS = ("quadruped", "biped", "lsystem")
@@ -175,13 +176,6 @@ def _specs(skeleton: Skeleton) -> tuple[tuple[ObservationSpec, ...], ActionSpec]
     size = 14 + 10 * len(skeleton.bones) + skeleton.num_hinges()
     return ((ObservationSpec((size,), (DimensionProperty.NONE,), ObservationType.DEFAULT, f"VectorSensor_size{size}"),),
             ActionSpec(continuous_size=skeleton.num_hinges(), discrete_branches=()))
-
-
-def _mat_to_quat(matrices: np.ndarray) -> np.ndarray:
-    out = np.empty((len(matrices), 4))
-    for i, m in enumerate(matrices):
-        mujoco.mju_mat2Quat(out[i], m.reshape(9))
-    return np.where(out[:, :1] < 0, -out, out)
 
 
 _DEFAULT_SPECS = _specs(generate(KINDS[0], 0))
@@ -363,7 +357,7 @@ class CreatureTask(Task):
         obs[:, 4:6] = 0.0
         rotation = np.stack([forward, left, np.tile([0.0, 0.0, 1.0], (n, 1))], axis=1)  # rows: cube axes
         root = data.xmat[self.root].reshape(n, 3, 3)
-        obs[:, 6:10] = _mat_to_quat(rotation @ root)
+        obs[:, 6:10] = matrix_quat(rotation @ root)
         obs[:, 10:13] = cube(self.target - com)
         obs[:, 13] = com[:, 2] - self.terrain_height(np.arange(n), com[:, :2])
         per_bone = np.concatenate([self.contact[..., None].astype(np.float64), cube(self.velocity),

@@ -1,8 +1,8 @@
 """The ``mimic`` task's reference motions: generate them (run once) and load them.
 
-    .venv/bin/python unity_stub_env/tasks/mimic_motions.py   # rewrites mimic_motions/*.csv
+    .venv/bin/python -m unity_stub_env.tasks.mimic.motions   # rewrites clips/*.csv
 
-Each motion is a CSV file in ``mimic_motions/`` beside this module, sampled at ``RATE`` = 50 Hz (the
+Each motion is a CSV file in ``clips/`` beside this module, sampled at ``RATE`` = 50 Hz (the
 task's control rate, so a control step is one frame): a header row, then one row per frame with
 ``time`` (s), the root (pelvis) position ``root_x root_y root_z`` (m, relative to the character's
 base on the floor) and orientation ``root_qw root_qx root_qy root_qz``, and the 26 joint angles (rad)
@@ -13,7 +13,7 @@ How they are made (keyframe-free, closed-form curves of the joint angles; w = 2 
   stand  1 s, every joint at 0 (upright, arms hanging).
   arms   4 s: one arm rises sideways while the other comes down (shoulder abduction 75 deg
          (1 -+ cos wt) / 2, elbows at 10 deg) and the head turns from side to side (neck rotation
-         40 deg sin wt), as the thesis' arm animation.
+         40 deg sin wt), like the seed project's arm animation (docs/stub-tasks.md).
   squat  4 s: depth s = (1 - cos wt) / 2; thighs flex 50 s deg, shanks lean 30 s deg forward (knees
          80 s, ankles 30 s dorsiflexion, so the soles stay flat), the pelvis pitches 15 s deg forward
          and the waist flexes 10 s deg; the arms reach forward (shoulder flexion 60 s deg) to keep
@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 XML_PATH = Path(__file__).with_name("mimic.xml")
-MOTION_DIR = Path(__file__).with_name("mimic_motions")
+MOTION_DIR = Path(__file__).with_name("clips")
 RATE = 50  # frames per second
 MOTIONS = ("stand", "arms", "squat", "walk")  # environment parameter ``motion`` = index into this
 JOINTS = ("waist_x", "waist_y", "waist_z", "neck_x", "neck_y", "neck_z",
@@ -60,7 +60,7 @@ class Motion:
 
 
 def load_motion(name: str) -> Motion:
-    """Read ``mimic_motions/NAME.csv``; ValueError names the known motions."""
+    """Read ``clips/NAME.csv``; ValueError names the known motions."""
     if name not in MOTIONS:
         raise ValueError(f"unknown motion {name!r}; known motions: {', '.join(MOTIONS)}")
     path = MOTION_DIR / f"{name}.csv"

@@ -1,4 +1,6 @@
-"""``dodge``: a kinematic humanoid learns to dodge thrown spheres with little effort.
+"""``dodge``: a kinematic humanoid learns to dodge thrown spheres with little effort (the task;
+its scripted evaluation is ``evaluation.py`` beside this module, the seed project it follows is
+cited in docs/stub-tasks.md).
 
 The character (``dodge.xml`` beside this file; z up, y = forward, x = the character's right) stands
 with fixed feet and static arms; the start pose has every joint angle at zero. Its joint positions
@@ -55,7 +57,7 @@ needs neither. Episodes are interrupted after max_step = 300 control steps (6 s;
 0.4-1.4 s). The pose is back at zero for the next episode.
 
 Throws (training): start at a horizontal distance of 4-6 m from the character's axis, from an
-azimuth within +-120 deg of straight ahead (front and both sides, as the thesis' test throws), at
+azimuth within +-120 deg of straight ahead (front and both sides, as the seed's test throws), at
 a height of 0.5-2 m; aimed at a random point of the character in its start pose (a geom chosen with
 probability proportional to its surface area, then a uniform point inside it); horizontal speed
 5-9 m/s. The launch velocity puts the sphere exactly on the target under MuJoCo's semi-implicit
@@ -77,7 +79,7 @@ Consequences worth knowing (measured on this model):
     1.11 m: legs 39 % of the surface, pelvis 10 %, the lower arms), where fixed feet cannot get out
     of the way; the evaluation therefore also reports the hit rate of the throws aimed higher.
   * A limit stops a rotation: pushing further into it leaves the pose unchanged, which is not a
-    move and costs nothing (the thesis charges the torso and neck only on steps they moved).
+    move and costs nothing (the seed charges the torso and neck only on steps they moved).
 """
 from __future__ import annotations
 
@@ -94,6 +96,14 @@ from protos.types import (
     ObservationSpec,
     ObservationType,
     StatsAggregationMethod,
+)
+from unity_stub_env.geometry import (
+    axis_angle_matrix,
+    convex_hull,
+    euler_to_matrix,
+    euler_to_quat,
+    matrix_to_euler,
+    polygon_centroid,
 )
 from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
 
@@ -183,50 +193,6 @@ def _geom_table(model: mujoco.MjModel, num_agents: int):
     return agent, region, ball
 
 
-# --- rotations, batched over leading axes ----------------------------------------------------
-def euler_to_matrix(e: np.ndarray) -> np.ndarray:
-    """[..., 3] x-y-z joint angles -> [..., 3, 3] R = Rx(a) Ry(b) Rz(c) (MuJoCo's order for three
-    hinges in one body)."""
-    ca, cb, cc = np.cos(e[..., 0]), np.cos(e[..., 1]), np.cos(e[..., 2])
-    sa, sb, sc = np.sin(e[..., 0]), np.sin(e[..., 1]), np.sin(e[..., 2])
-    r = np.empty(e.shape[:-1] + (3, 3))
-    r[..., 0, 0], r[..., 0, 1], r[..., 0, 2] = cb * cc, -cb * sc, sb
-    r[..., 1, 0] = ca * sc + sa * sb * cc
-    r[..., 1, 1] = ca * cc - sa * sb * sc
-    r[..., 1, 2] = -sa * cb
-    r[..., 2, 0] = sa * sc - ca * sb * cc
-    r[..., 2, 1] = sa * cc + ca * sb * sc
-    r[..., 2, 2] = ca * cb
-    return r
-
-
-def matrix_to_euler(r: np.ndarray) -> np.ndarray:
-    """Inverse of ``euler_to_matrix`` for |b| < 90 deg."""
-    return np.stack([np.arctan2(-r[..., 1, 2], r[..., 2, 2]),
-                     np.arcsin(np.clip(r[..., 0, 2], -1.0, 1.0)),
-                     np.arctan2(-r[..., 0, 1], r[..., 0, 0])], axis=-1)
-
-
-def euler_to_quat(e: np.ndarray) -> np.ndarray:
-    """[..., 3] x-y-z joint angles -> [..., 4] quaternion (w, x, y, z) of Rx Ry Rz, w >= 0."""
-    h = 0.5 * e
-    ca, cb, cc = np.cos(h[..., 0]), np.cos(h[..., 1]), np.cos(h[..., 2])
-    sa, sb, sc = np.sin(h[..., 0]), np.sin(h[..., 1]), np.sin(h[..., 2])
-    pw, px, py, pz = ca * cb, sa * cb, ca * sb, sa * sb  # qx(a) * qy(b)
-    q = np.stack([pw * cc - pz * sc, px * cc + py * sc, py * cc - px * sc, pz * cc + pw * sc], axis=-1)
-    return np.where(q[..., :1] < 0, -q, q)
-
-
-def axis_angle_matrix(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rodrigues: unit axis [..., 3], angle [...] -> [..., 3, 3]."""
-    c, s = np.cos(angle)[..., None, None], np.sin(angle)[..., None, None]
-    x, y, z = axis[..., 0], axis[..., 1], axis[..., 2]
-    k = np.zeros(axis.shape[:-1] + (3, 3))
-    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -z, y, -x
-    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = z, -y, x
-    return np.eye(3) * c + s * k + (1.0 - c) * axis[..., :, None] * axis[..., None, :]
-
-
 def effort(alpha_degrees: np.ndarray) -> np.ndarray:
     """The magnitude of one effort term: e^(a/100)/100 (the reward is its negative)."""
     return np.exp(np.asarray(alpha_degrees, dtype=np.float64) / 100.0) / 100.0
@@ -234,31 +200,6 @@ def effort(alpha_degrees: np.ndarray) -> np.ndarray:
 
 def _dead_zone(a: np.ndarray) -> np.ndarray:
     return np.where(np.abs(a) <= DEAD_ZONE, 0.0, a)
-
-
-def convex_hull(points: np.ndarray) -> np.ndarray:
-    """Counter-clockwise hull of 2-D points [k, 2] (Andrew's monotone chain)."""
-    pts = sorted(map(tuple, np.round(points, 12)))
-    cross = lambda o, a, b: (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])  # noqa: E731
-    lower, upper = [], []
-    for p in pts:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
-            lower.pop()
-        lower.append(p)
-    for p in reversed(pts):
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
-            upper.pop()
-        upper.append(p)
-    return np.array(lower[:-1] + upper[:-1])
-
-
-def polygon_centroid(hull: np.ndarray) -> np.ndarray:
-    """Area centroid of a counter-clockwise polygon [k, 2]."""
-    x, y = hull[:, 0], hull[:, 1]
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
-    cross = x * yn - xn * y
-    area = cross.sum() / 2.0
-    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
 
 
 class DodgeTask(Task):
@@ -272,7 +213,7 @@ class DodgeTask(Task):
     max_step = 300
     decision_period = 1
     sets_reward = False
-    description = ("Kinematic humanoid dodging thrown spheres (seed 000). Observations: crouch (1), "
+    description = ("Kinematic humanoid dodging thrown spheres (docs/stub-tasks.md). Observations: crouch (1), "
                    "torso quaternion (4), neck quaternion (4), CoM - support centroid x,y (2), "
                    "sphere - pelvis (3), sphere velocity (3). Actions: crouch (1), torso axis (3) + "
                    "angle (1), neck axis (3) + angle (1). +5 pass, -5 balance lost, hit -5 head .. -2 legs.")
@@ -500,102 +441,3 @@ class DodgeTask(Task):
         agents, first = np.unique(self.geom_agent[part[touching]], return_index=True)
         new = hit_region[agents] == len(REGIONS)
         hit_region[agents[new]] = self.geom_region[part[touching[first[new]]]]
-
-
-# --- scripted evaluation ------------------------------------------------------------------------
-# The thesis' test: 17 throws, each from one of three start sides (the character's right, left, or
-# straight ahead) at one marked body region. Its figure of the marks is not in the text we have;
-# the text fixes throw 1 (from the front at the left shoulder) and throw 17 (from the left at the
-# lower-middle torso, the hardest); the rest is our reconstruction: 7 from the front, 5 from each
-# side, at regions a thrower would aim for. Targets are start-pose points relative to the base.
-MARKS = {
-    "head": (0.0, 0.01, 1.64), "left shoulder": (-0.2, 0.0, 1.44), "right shoulder": (0.2, 0.0, 1.44),
-    "chest": (0.0, 0.0, 1.36), "lower torso": (0.0, 0.0, 1.16), "pelvis": (0.0, 0.0, 1.0),
-    "left thigh": (-0.1, 0.0, 0.75),
-}
-SIDES = {"front": (0.0, 5.0), "right": (5.0, 0.0), "left": (-5.0, 0.0)}  # start x, y (m)
-SCRIPTED_THROWS = (
-    ("front", "left shoulder"), ("front", "head"), ("front", "right shoulder"), ("front", "chest"),
-    ("front", "lower torso"), ("front", "pelvis"), ("front", "left thigh"),
-    ("right", "head"), ("right", "right shoulder"), ("right", "chest"), ("right", "lower torso"),
-    ("right", "pelvis"),
-    ("left", "head"), ("left", "left shoulder"), ("left", "chest"), ("left", "pelvis"), ("left", "lower torso"),
-)
-SCRIPTED_HEIGHT = 1.5  # m, the thrower's hand
-SCRIPTED_SPEED = 7.0  # m/s, horizontal
-EVAL_AREAS_PER_BATCH = 8  # 112 characters in one model
-UPPER_BODY = 1.11  # m: targets above the pelvis' top
-
-
-def scripted_throws() -> Throws:
-    """The 17 scripted throws of the evaluation, in the order of SCRIPTED_THROWS."""
-    start = np.array([[*SIDES[side], SCRIPTED_HEIGHT] for side, _ in SCRIPTED_THROWS])
-    target = np.array([MARKS[mark] for _, mark in SCRIPTED_THROWS])
-    return Throws(start, target, np.full(len(SCRIPTED_THROWS), SCRIPTED_SPEED))
-
-
-def random_throws(count: int, seed: int) -> Throws:
-    """``count`` throws of the training distribution, from their own seeded generator."""
-    return DodgeTask(1, seed).draw_throws(count, np.random.default_rng(seed))
-
-
-def run_throws(throws: Throws, act, seed: int = 0) -> dict[str, np.ndarray]:
-    """One episode per throw with the policy ``act`` (float32 [n, 17] -> [n, 9]); per throw:
-    hit_region (index into REGIONS, -1 none), balance_lost, passed, effort (sum of the effort
-    magnitudes), episode_return, steps. Batches of up to 112 characters share one model."""
-    keys = ("hit_region", "balance_lost", "passed", "effort", "episode_return", "steps")
-    out = {key: [] for key in keys}
-    batch = EVAL_AREAS_PER_BATCH * AGENTS_PER_AREA
-    for first in range(0, len(throws), batch):
-        count = min(batch, len(throws) - first)
-        task = DodgeTask(-(-count // AGENTS_PER_AREA), seed)
-        n = task.num_agents
-        rows = np.minimum(np.arange(n), count - 1) + first  # spare characters repeat the last throw
-        task.launch(np.arange(n), Throws(throws.start[rows], throws.target[rows], throws.speed[rows]))
-        record = {"hit_region": np.full(n, -1), "balance_lost": np.zeros(n, bool), "passed": np.zeros(n, bool),
-                  "effort": np.zeros(n), "episode_return": np.zeros(n), "steps": np.zeros(n, np.int64)}
-        running = np.ones(n, dtype=bool)
-        while running.any():
-            result = task.step(np.asarray(act(task.observe()[0]), dtype=np.float64), np.zeros((n, 0)))
-            record["effort"][running] += task.last_effort[running]
-            record["episode_return"][running] += result.rewards[running]
-            record["steps"][running] += 1
-            ended = running & result.done
-            record["hit_region"][ended] = task.last_hit_region[ended]
-            record["balance_lost"][ended] = task.last_balance_lost[ended]
-            record["passed"][ended] = task.last_passed[ended]
-            running &= ~result.done
-        for key in keys:
-            out[key].append(record[key][:count])
-    return {key: np.concatenate(values) for key, values in out.items()}
-
-
-def summarize(outcome: dict[str, np.ndarray], throws: Throws) -> dict[str, float]:
-    """Rates over the episodes of ``run_throws``: hit, balance loss, pass; mean effort and return;
-    and the hit rate of the throws aimed above the pelvis (UPPER_BODY), the ones fixed feet allow
-    to dodge (a pelvis or leg target can at best be ducked under by a high arc)."""
-    hit = outcome["hit_region"] >= 0
-    upper = throws.target[:, 2] > UPPER_BODY
-    return {"episodes": int(len(outcome["steps"])),
-            "hit_rate": float(np.mean(hit)),
-            "upper_body_throws": int(upper.sum()),
-            "upper_body_hit_rate": float(np.mean(hit[upper])) if upper.any() else float("nan"),
-            "balance_loss_rate": float(np.mean(outcome["balance_lost"])),
-            "pass_rate": float(np.mean(outcome["passed"])),
-            "mean_effort": float(np.mean(outcome["effort"])),
-            "mean_return": float(np.mean(outcome["episode_return"])),
-            "mean_steps": float(np.mean(outcome["steps"]))}
-
-
-def evaluate(act, seed: int = 0, episodes: int = 500) -> dict:
-    """The scripted evaluation: the 17 scripted throws and ``episodes`` seeded random throws."""
-    scripted_set, random_set = scripted_throws(), random_throws(episodes, seed)
-    scripted = run_throws(scripted_set, act, seed)
-    randomly = run_throws(random_set, act, seed)
-    per_throw = [{"throw": i + 1, "side": side, "mark": mark,
-                  "outcome": ("hit " + REGIONS[scripted["hit_region"][i]] if scripted["hit_region"][i] >= 0
-                              else "balance lost" if scripted["balance_lost"][i]
-                              else "passed" if scripted["passed"][i] else "interrupted")}
-                 for i, (side, mark) in enumerate(SCRIPTED_THROWS)]
-    return {"scripted": summarize(scripted, scripted_set), "random": summarize(randomly, random_set),
-            "scripted_throws": per_throw}

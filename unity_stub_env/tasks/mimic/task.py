@@ -1,4 +1,7 @@
-"""``mimic``: a physically simulated ragdoll keeps its balance and imitates reference motions.
+"""``mimic``: a physically simulated ragdoll keeps its balance and imitates reference motions (the
+task; ``motions.py`` makes and loads the reference clips, ``expert.py`` is a scripted balance
+expert, ``evaluation.py`` the scripted evaluation; the seed project it follows is cited in
+docs/stub-tasks.md).
 
 The character (``mimic.xml`` beside this file; z up, y forward, x the character's right) is a
 70 kg ragdoll of 16 capsule/box segments with a free root (the pelvis). Masses follow the human
@@ -14,33 +17,31 @@ Every axis is driven by a PD controller, a MuJoCo position actuator (torque = kp
 kv q', limited; kv is integrated implicitly): waist, hips and knees kp 1500 N m/rad, kv 150 N m s/rad,
 |torque| <= 400 N m; ankles 1500/150/250; shoulders 150/15/100; elbows 80/8/60; neck 100/10/60.
 Why so stiff at the ankles: standing is an inverted pendulum needing m g h ~ 70 * 9.81 * 1 ~ 700
-N m/rad from the two ankles together; at 300 each the character sagged and fell within 2 s. With the
-targets on the reference pose (``residual`` mode, zero actions) these gains hold stand, arms and
-squat for 10 s (r_r 1.00, 0.96, 0.95) and withstand a 10 N s push every 2 s, not 20; the walk
-falls within 0.6 s (``unity-stub-env --task mimic --evaluate zero``, row "reference PD").
+N m/rad from the two ankles together; softer ankles sag and fall. How well these gains track the
+reference on their own is the row "reference PD" of ``unity-stub-env --task mimic --evaluate zero``
+(bench/RESULTS.md).
 Ragdolls never touch each other (collision bits: ragdoll geoms only meet the floor) and have no
 self-collision, so one MjModel holds all ``num_areas * 8`` of them.
 
-Control: MuJoCo steps of 0.004 s (250 Hz, the thesis' physics and PD rate), one action every 5 of
-them: 50 decisions per second, not the thesis' 250. Why: the PD loop still runs at 250 Hz inside
+Control: MuJoCo steps of 0.004 s (250 Hz, the seed's physics and PD rate), one action every 5 of
+them: 50 decisions per second, not the seed's 250. Why: the PD loop still runs at 250 Hz inside
 MuJoCo, and at 250 decisions/s a 10 s episode is 2,500 agent steps, so the few hundred thousand
 steps a bench run affords on this machine would be ~100 episodes; DeepMimic itself decides at
 30 Hz over a 1.2 kHz simulation. Episodes are interrupted after max_step = 500 decisions (10 s).
 
 Actions, 26 continuous in [-1, 1], one per axis in mimic.xml's actuator order (``JOINTS`` of
-``mimic_motions``). Environment parameter ``residual`` (read at episode start):
-  0 (default, the thesis' absolute targets): target = a high for a >= 0, -a low for a < 0: the
+``motions``). Environment parameter ``residual`` (read at episode start):
+  0 (default, the seed's absolute targets): target = a high for a >= 0, -a low for a < 0: the
     action mapped piecewise linearly onto the axis' limits with a = 0 at the anatomical neutral
     (0 rad, mimic.xml's standing pose; every range contains it). Why not the linear map
     low + (a + 1) / 2 (high - low): its a = 0 is the middle of each range (hips 45 deg, knees 75
-    deg flexed: a deep crouch), so an untrained policy folded and fell within 0.8 s and PPO learned
-    nothing in 80k steps (bench/RESULTS.md, 2026-11-25 evening); with the neutral at a = 0 the
-    untrained policy stands in the PD's rest pose and the whole range stays reachable (zero
-    actions: stand, arms and squat kept 10 s, r_r 1.00 / 0.05 / 0.29; a push of 10 N s every 2 s
-    withstood in 100 % of trials, 15 N s in 62 %). Exploration is the hard part of this mode: PPO's
-    Gaussian starts at std 1/3 in action units (std 1, sent as clamp(a, -3, 3) / 3), and white
-    noise of std 0.1 (0.05) around the standing pose already topples the ragdoll in ~1.3 s (~3 s);
-    the bench recipes start from cloned demonstrations instead (bench/mimic/*_bc*.yaml, docs/stub-tasks.md);
+    deg flexed: a deep crouch), so an untrained policy folds and falls at once and PPO learned
+    nothing (bench/RESULTS.md); with the neutral at a = 0 the untrained policy stands in the PD's
+    rest pose and the whole range stays reachable. Exploration is the hard part of this mode:
+    PPO's Gaussian starts at std 1/3 in action units (std 1, sent as clamp(a, -3, 3) / 3), and
+    white noise that small around the standing pose topples the ragdoll within seconds
+    (bench/RESULTS.md); the bench recipes start from cloned demonstrations instead
+    (bench/mimic/*_bc*.yaml, docs/stub-tasks.md);
   r > 0 (DeepMimic-like, our option): target = reference angle + a r (high - low) / 2, clipped to
     the limits: zero actions track the reference and the policy learns corrections.
 
@@ -53,11 +54,11 @@ pelvis frame; then the phase of the reference in [0, 1) (frame / frames; 0 for `
 reference pose itself is not observed. Observations and rewards read MuJoCo's kinematics after the
 decision's last ``mj_step``, i.e. of the state one 0.004 s step earlier (what ``mj_step`` leaves).
 
-Reference motions (``mimic_motions``: stand, arms, squat, walk, CSV files at 50 Hz made by
-``python -m unity_stub_env.tasks.mimic_motions``), chosen per episode by the environment parameter
+Reference motions (``motions``: stand, arms, squat, walk, CSV files at 50 Hz made by
+``python -m unity_stub_env.tasks.mimic.motions``), chosen per episode by the environment parameter
 ``motion`` = 0 stand, 1 arms, 2 squat, 3 walk (a curriculum can move between them). The reference
 is kinematic: only its numbers are used. For the walk the reference's forward position follows the
-ragdoll's pelvis (as the thesis does), for the other motions it stays at the agent's base.
+ragdoll's pelvis (as the seed does), for the other motions it stays at the agent's base.
 
 Reward (DeepMimic-style, each decision, against the reference frame reached by that decision):
   R = w_r r_r + w_v r_v + w_m r_m + w_e r_e + w_t r_t with
@@ -66,10 +67,10 @@ Reward (DeepMimic-style, each decision, against the reference frame reached by t
   r_m = exp(-k_m |m - m^|^2)                 centre of mass (world)
   r_e = exp(-k_e sum_e |p_e - p^_e|^2)       hands and feet (world; geom centres)
   r_t = exp(-k_t (v_y - v^_y)^2)             forward pelvis velocity against the clip's mean speed
-Weights (environment parameter ``reward_weights``): 0 = the thesis' (per motion, its tables 5.4,
-5.6, 5.8, 5.10: stand and arms w_r 0.7, w_v 0.15, w_m 0.15; squat 0.65, 0.1, 0.1, w_e 0.15; walk 0.56,
+Weights (environment parameter ``reward_weights``): 0 = the seed's (per motion, as its tables give
+them: stand and arms w_r 0.7, w_v 0.15, w_m 0.15; squat 0.65, 0.1, 0.1, w_e 0.15; walk 0.56,
 0.07, 0.07, 0.1, w_t 0.2), 1 = DeepMimic's (pose 0.65, velocity 0.1, end effectors 0.15, CoM 0.1).
-Scales: DeepMimic's k_r 2, k_v 0.1, k_e 40, k_m 10 (the thesis does not give its own), k_t 2 (our
+Scales: DeepMimic's k_r 2, k_v 0.1, k_e 40, k_m 10 (the seed does not give its own), k_t 2 (our
 choice: 0.5 m/s off costs 40 %). Any single value can be overridden by the environment parameters
 ``w_r w_v w_m w_e w_t k_r k_v k_m k_e k_t`` (negative = keep the preset).
 
@@ -96,8 +97,9 @@ from protos.types import (
     ObservationType,
     StatsAggregationMethod,
 )
+from unity_stub_env.geometry import cross, quat_angle, quat_conj, quat_mul
 from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
-from unity_stub_env.tasks.mimic_motions import JOINTS, MOTIONS, RATE, load_motion
+from unity_stub_env.tasks.mimic.motions import JOINTS, MOTIONS, RATE, load_motion
 
 XML_PATH = Path(__file__).with_name("mimic.xml")
 AGENTS_PER_AREA = 8
@@ -111,7 +113,7 @@ END_EFFECTORS = ("hand_r", "hand_l", "foot_r", "foot_l")  # geoms
 FEET = ("foot_r", "foot_l")
 OBSERVATION_SIZE = 13 * len(OBSERVED) + 1
 TERMS = ("r_r", "r_v", "r_m", "r_e", "r_t")
-THESIS_WEIGHTS = {"stand": (0.7, 0.15, 0.15, 0.0, 0.0), "arms": (0.7, 0.15, 0.15, 0.0, 0.0),
+SEED_WEIGHTS = {"stand": (0.7, 0.15, 0.15, 0.0, 0.0), "arms": (0.7, 0.15, 0.15, 0.0, 0.0),
                   "squat": (0.65, 0.1, 0.1, 0.15, 0.0), "walk": (0.56, 0.07, 0.07, 0.1, 0.2)}
 DEEPMIMIC_WEIGHTS = (0.65, 0.1, 0.1, 0.15, 0.0)  # in TERMS order: pose, velocity, CoM, end effectors
 SCALES = (2.0, 0.1, 10.0, 40.0, 2.0)  # k_r, k_v, k_m, k_e, k_t
@@ -124,37 +126,6 @@ def reward_terms(rot_sq: np.ndarray, vel_sq: np.ndarray, com_sq: np.ndarray, end
     """[n, 5]: the five terms exp(-k x) from the summed squared errors (each float [n])."""
     errors = np.stack([rot_sq, vel_sq, com_sq, end_sq, speed_sq], axis=-1)
     return np.exp(-np.asarray(scales, dtype=np.float64) * errors)
-
-
-def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle (rad) of the rotation between unit quaternions a and b [..., 4]."""
-    dot = np.abs((a * b).sum(axis=-1))
-    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions (w, x, y, z) [..., 4]."""
-    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = aw * bw - ax * bx - ay * by - az * bz
-    out[..., 1] = aw * bx + ax * bw + ay * bz - az * by
-    out[..., 2] = aw * by - ax * bz + ay * bw + az * bx
-    out[..., 3] = aw * bz + ax * by - ay * bx + az * bw
-    return out
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b for [..., 3] arrays (np.cross's axis handling costs more than the product here)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
-
-
-def quat_conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def build_model(num_agents: int) -> tuple[mujoco.MjModel, np.ndarray]:
@@ -234,7 +205,7 @@ class MimicTask(Task):
     max_step = 500
     decision_period = 1
     sets_reward = False
-    description = ("PD-controlled ragdoll imitating a reference motion (seed 001). Observations: 13 parts x "
+    description = ("PD-controlled ragdoll imitating a reference motion (docs/stub-tasks.md). Observations: 13 parts x "
                    "(local rotation 4, linear velocity 3, angular velocity 3, position from the pelvis 3) + "
                    "phase (1). Actions: 26 PD targets. DeepMimic-style reward; env params motion (0 stand, "
                    "1 arms, 2 squat, 3 walk), residual, push_impulse, push_interval, reward_weights, rsi.")
@@ -321,8 +292,8 @@ class MimicTask(Task):
         self.episode_step[agents] = 0
         self.term_sum[agents] = 0.0
         preset = np.rint(get("reward_weights", 0, count))
-        thesis = np.array([THESIS_WEIGHTS[name] for name in MOTIONS])[motion]
-        weights = np.where(preset[:, None] == 1, np.array(DEEPMIMIC_WEIGHTS), thesis)
+        seed_weights = np.array([SEED_WEIGHTS[name] for name in MOTIONS])[motion]
+        weights = np.where(preset[:, None] == 1, np.array(DEEPMIMIC_WEIGHTS), seed_weights)
         scales = np.tile(SCALES, (count, 1))
         for j, term in enumerate(("r", "v", "m", "e", "t")):
             w, k = get(f"w_{term}", -1, count), get(f"k_{term}", -1, count)
@@ -458,153 +429,3 @@ class MimicTask(Task):
             bad = floor & ~self.geom_is_foot[other] & (self.geom_agent[other] >= 0)
             fallen[self.geom_agent[other[bad]]] = True
         return fallen
-
-
-# --- the scripted balance expert (standing under pushes) ----------------------------------------
-# An ankle strategy from the capture point (bench/RESULTS.md, 2026-11-27 "mimic: pushed standing"):
-# every decision, from the observation alone, the centre of mass is estimated as the mass-weighted
-# mean of the 13 observed parts' origins and velocities (a hand goes with its forearm), taken into
-# the heading frame (the pelvis' yaw, z up; x right, y forward) and compared with the midpoint of
-# the feet. The capture point offset xi = (c - c0) + v / omega0, omega0 = sqrt(g / 0.93 m) (the
-# neutral pose's CoM height) and c0 = the neutral pose's own offset, is where the CoM would come to
-# rest as a linear inverted pendulum. Both ankles then turn the soles to press towards it,
-# BALANCE_ANKLE_GAIN rad of PD target per m: plantar flexion when xi points forward, the right edges
-# of both soles down when it points right; every other joint's target stays at the neutral 0 rad
-# (the stand clip's pose). Gains from a sweep at 15 N s every 2 s, 16 trials, seed 0: sagittal 1.5
-# or 2 and lateral 1 to 2 kept 16/16, lateral 3 or the wrong sign fell (see bench/RESULTS.md).
-BALANCE_ANKLE_GAIN = 1.5  # rad of ankle target per m of capture-point offset
-BALANCE_COM_HEIGHT = 0.93  # m, the neutral pose's centre of mass above the floor (mimic.xml)
-GRAVITY = 9.81
-
-
-def quat_matrix(q: np.ndarray) -> np.ndarray:
-    """[n, 3, 3] rotation matrices of unit quaternions (w, x, y, z) [n, 4]."""
-    w, x, y, z = (q[:, i] for i in range(4))
-    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-                     2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-                     2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1).reshape(-1, 3, 3)
-
-
-class BalanceExpert:
-    """``act(obs [n, 170]) -> actions [n, 26]`` of the default (absolute) mode: the neutral standing
-    pose with the ankle strategy above. Reads mimic.xml once for the part masses and joint limits."""
-
-    def __init__(self, gain: float = BALANCE_ANKLE_GAIN) -> None:
-        model = mujoco.MjModel.from_xml_path(str(XML_PATH))
-        body = lambda name: model.body(name).id  # noqa: E731
-        # a part's own mass; the forearm carries its welded hand
-        self.mass = np.array([model.body_subtreemass[body(b)] if b.startswith("forearm") else model.body_mass[body(b)]
-                              for b in OBSERVED])
-        self.low = model.jnt_range[[model.joint(j).id for j in JOINTS], 0]
-        self.high = model.jnt_range[[model.joint(j).id for j in JOINTS], 1]
-        self.gain = gain
-        self.omega = math.sqrt(GRAVITY / BALANCE_COM_HEIGHT)
-        self.index = {name: j for j, name in enumerate(JOINTS)}
-
-    def offset(self, position: np.ndarray, to_heading: np.ndarray) -> np.ndarray:
-        """[n, 2]: the estimated CoM minus the feet's midpoint, horizontal, in the heading frame, from
-        the parts' positions relative to the pelvis [n, 13, 3] (pelvis frame) and the pelvis-to-heading
-        rotations [n, 3, 3]."""
-        com = (self.mass[:, None] * position).sum(axis=1) / self.mass.sum()
-        feet = position[:, [OBSERVED.index("foot_r"), OBSERVED.index("foot_l")]].mean(axis=1)
-        return np.einsum("nij,nj->ni", to_heading, com - feet)[:, :2]
-
-    def capture_point(self, obs: np.ndarray) -> np.ndarray:
-        """[n, 2]: the capture point offset xi (m; x right, y forward) of every agent's observation."""
-        parts = np.asarray(obs, np.float64)[:, :13 * len(OBSERVED)].reshape(len(obs), len(OBSERVED), 13)
-        rotation = quat_matrix(parts[:, 0, 0:4])  # pelvis -> world
-        forward = rotation[:, :, 1]
-        yaw = np.arctan2(-forward[:, 0], forward[:, 1])
-        c, s, zero, one = np.cos(yaw), np.sin(yaw), np.zeros(len(yaw)), np.ones(len(yaw))
-        heading = np.stack([c, -s, zero, s, c, zero, zero, zero, one], axis=1).reshape(-1, 3, 3)
-        to_heading = np.einsum("nji,njk->nik", heading, rotation)  # heading^T rotation
-        position = parts[:, :, 10:13].copy()
-        position[:, 0] = 0.0  # the pelvis' slot holds its height, not a relative position
-        velocity = (self.mass[:, None] * parts[:, :, 4:7]).sum(axis=1) / self.mass.sum()
-        speed = np.einsum("nij,nj->ni", to_heading, velocity)[:, :2]
-        return self.offset(position, to_heading) + speed / self.omega
-
-    def targets(self, obs: np.ndarray) -> np.ndarray:
-        """[n, 26] PD targets (rad): 0 but the four ankle axes."""
-        xi = self.capture_point(obs)
-        target, j = np.zeros((len(obs), len(JOINTS))), self.index
-        target[:, j["ankle_x_r"]] = target[:, j["ankle_x_l"]] = -self.gain * xi[:, 1]  # plantar flexion
-        target[:, j["ankle_y_r"]] = -self.gain * xi[:, 0]  # positive ankle_y lifts a sole's outer edge
-        target[:, j["ankle_y_l"]] = self.gain * xi[:, 0]
-        return target
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        """Actions [n, 26] (float32): the absolute map's inverse of ``targets``."""
-        q = np.clip(self.targets(obs), self.low, self.high)
-        up = np.divide(q, self.high, out=np.zeros_like(q), where=self.high > 0)
-        down = np.divide(-q, self.low, out=np.zeros_like(q), where=self.low < 0)
-        return np.where(q >= 0.0, up, down).astype(np.float32)
-
-
-# --- scripted evaluation ------------------------------------------------------------------------
-# Per motion, ``trials`` ragdolls start at the clip's first frame (no RSI) and act for 10 s of
-# simulated time (500 decisions); then the standing ragdoll is pushed every PUSH_EVAL_INTERVAL s
-# with each impulse of PUSH_LADDER (N s; 70 kg: 10 N s changes the whole body's velocity by
-# 0.14 m/s), in a random horizontal direction at the torso.
-EVAL_SECONDS = 10.0
-PUSH_LADDER = (10.0, 15.0, 20.0, 30.0)
-PUSH_EVAL_INTERVAL = 2.0
-
-
-def run_trials(act, motion: int, trials: int, seed: int, push_impulse: float = 0.0,
-               push_interval: float = PUSH_EVAL_INTERVAL, residual: float = 0.0) -> dict:
-    """``trials`` episodes of EVAL_SECONDS with the policy ``act`` (float32 [n, 170] -> [n, 26]):
-    the fraction that kept their balance (no early termination) and, over every decision before a
-    trial ended, the mean of each reward term and of the reward."""
-    params = EnvironmentParameters()
-    for key, value in (("motion", motion), ("rsi", 0), ("push_impulse", push_impulse),
-                       ("push_interval", push_interval), ("residual", residual)):
-        params.set(key, lambda value=value: value)
-    task = MimicTask(-(-trials // AGENTS_PER_AREA), seed, params)
-    n = task.num_agents
-    running = np.ones(n, dtype=bool)
-    kept = np.zeros(n, dtype=bool)
-    terms, reward, steps = np.zeros((n, 5)), np.zeros(n), np.zeros(n)
-    for _ in range(round(EVAL_SECONDS / CONTROL_DT)):
-        result = task.step(np.asarray(act(task.observe()[0]), dtype=np.float64), np.zeros((n, 0)))
-        terms[running] += task.last_terms[running]
-        reward[running] += result.rewards[running]
-        steps[running] += 1
-        kept |= running & result.interrupted
-        running &= ~result.done
-        if not running.any():
-            break
-    kept, terms, reward, steps = kept[:trials], terms[:trials], reward[:trials], steps[:trials]
-    total = steps.sum()
-    out = {"trials": int(trials), "balance_kept": float(kept.mean()), "mean_seconds": float(steps.mean() * CONTROL_DT),
-           "mean_reward": float(reward.sum() / total)}
-    out.update({term: float(terms[:, j].sum() / total) for j, term in enumerate(TERMS)})
-    return out
-
-
-def evaluate(act, seed: int = 0, episodes: int = 32, residual: float = 0.0) -> dict:
-    """The scripted evaluation: every motion unpushed, then standing under the PUSH_LADDER."""
-    motions = {name: run_trials(act, m, episodes, seed, residual=residual) for m, name in enumerate(MOTIONS)}
-    pushed = {f"{impulse:g}": run_trials(act, 0, episodes, seed, impulse, PUSH_EVAL_INTERVAL, residual)
-              for impulse in PUSH_LADDER}
-    return {"motions": motions, "pushed_stand": pushed, "push_interval_s": PUSH_EVAL_INTERVAL}
-
-
-def format_table(results: dict) -> str:
-    """Markdown: per policy and motion the balance-kept rate and the mean reward terms; then the
-    standing balance under pushes."""
-    lines = ["| policy | motion | trials | balance kept 10 s | mean s | r_r | r_v | r_m | r_e | r_t | mean reward |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, result in results.items():
-        for motion, s in result["motions"].items():
-            lines.append(f"| {name} | {motion} | {s['trials']} | {s['balance_kept']:.3f} | {s['mean_seconds']:.2f} | "
-                         f"{s['r_r']:.3f} | {s['r_v']:.3f} | {s['r_m']:.3f} | {s['r_e']:.3f} | {s['r_t']:.3f} | "
-                         f"{s['mean_reward']:.3f} |")
-    first = next(iter(results.values()))
-    lines += ["", f"Standing, balance kept for 10 s under a push every {first['push_interval_s']:g} s (random "
-              "horizontal direction, at the torso), per impulse:",
-              "| policy | " + " | ".join(f"{k} N s" for k in first["pushed_stand"]) + " |",
-              "|---|" + "---|" * len(first["pushed_stand"])]
-    for name, result in results.items():
-        lines.append(f"| {name} | " + " | ".join(f"{s['balance_kept']:.3f}" for s in result["pushed_stand"].values()) + " |")
-    return "\n".join(lines)
