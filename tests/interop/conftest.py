@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.interop_venv import INTEROP_PYTHON, INTEROP_VENV
+from tests.interop_venv import INTEROP_PYTHON, INTEROP_VENV, REPO
 from unity_stub_env.launcher import write_player_launcher
 
 PEER_SCRIPTS = Path(__file__).resolve().parent / "peer_scripts"
