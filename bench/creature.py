@@ -1,4 +1,4 @@
-"""Benchmarks of the stub task ``creature`` (seed 002; run by hand, not a test).
+"""Benchmarks of the stub task ``creature`` (docs/stub-tasks.md; run by hand, not a test).
 
     .venv/bin/python bench/creature.py steps [--areas 1 8] [--steps 200] [--repeats 5] [--kind quadruped]
     .venv/bin/python bench/creature.py evaluate POLICY [POLICY ...] [--kind quadruped --creature-seed 7]

@@ -1,5 +1,6 @@
-"""HMM training and sampling speed (seed 004): co-occurrence ("fast") training against Baum-Welch,
-and alias against CDF + binary-search sampling. Prints markdown tables, writes bench/out/hmm.json.
+"""HMM training and sampling speed (the runner thesis, docs/stub-tasks.md): co-occurrence ("fast")
+training against Baum-Welch, and alias against CDF + binary-search sampling. Prints markdown tables,
+writes bench/out/hmm.json.
 
     .venv/bin/python bench/hmm.py                      # T = 1e3..1e6, N = 2..40, K = 3..1000
     .venv/bin/python bench/hmm.py --quick              # smaller sizes, for a smoke run

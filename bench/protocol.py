@@ -6,7 +6,8 @@ Measures, in one run on the same machine:
   (i)   our UnityEndpoint answering every step with a preallocated all-zero ActionTuple, against
         the stub ``basic`` running as a separate process (``--num-areas`` 16 and 64 agents);
   (ii)  the real mlagents_envs 1.1.0 UnityEnvironment (in .venv-interop, its own process) with
-        random actions against the same stub and agent counts;
+        random actions against the same stub and agent counts (bench/envs_api.py runs our
+        mlagents_like_envs UnityEnvironment through the very same loop against it);
   (iii) the stub's raw task steps/s without any protocol (make_task + step loop) for basic and
         ball3d, and ball3d through the protocol, to express protocol overhead as a percentage of
         ball3d physics time per decision (decision_period physics steps).
@@ -124,19 +125,25 @@ def bench_endpoint(task: str, num_areas: int, warmup: int, exchanges: int,
     return out
 
 
-def bench_mlagents_envs(task: str, num_areas: int, warmup: int, exchanges: int) -> dict | None:
-    """(ii): the real UnityEnvironment in .venv-interop with random actions; None if missing."""
-    if not INTEROP_PYTHON.exists():
+def bench_mlagents_envs(task: str, num_areas: int, warmup: int, exchanges: int,
+                        package: str = "mlagents_envs") -> dict | None:
+    """(ii): the real UnityEnvironment in .venv-interop with random actions (None if that venv is
+    missing), or with ``package="mlagents_like_envs"`` ours, in this venv, through the same loop."""
+    ours = package != "mlagents_envs"
+    if not ours and not INTEROP_PYTHON.exists():
         return None
     with tempfile.TemporaryDirectory() as folder:
         exe = write_player_launcher(folder, [task], extra_args=STUB_FLAGS + transport_args(transport()))
         options = {"file_name": str(exe.with_suffix("")), "base_port": free_port(),
-                   "num_areas": num_areas, "warmup": warmup, "exchanges": exchanges}
+                   "num_areas": num_areas, "warmup": warmup, "exchanges": exchanges, "package": package}
         env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-        completed = subprocess.run([str(INTEROP_PYTHON), str(PEER), json.dumps(options)], cwd=folder,
+        if ours:
+            env["PYTHONPATH"] = str(REPO)
+        python = sys.executable if ours else str(INTEROP_PYTHON)
+        completed = subprocess.run([python, str(PEER), json.dumps(options)], cwd=folder,
                                    capture_output=True, text=True, timeout=900, env=env)
     if completed.returncode != 0:
-        raise RuntimeError(f"mlagents_envs peer failed:\n{completed.stderr[-3000:]}")
+        raise RuntimeError(f"{package} rollout failed:\n{completed.stderr[-3000:]}")
     return json.loads(completed.stdout.strip().splitlines()[-1])
 
 

@@ -6,7 +6,7 @@
 
 allreduce  two gloo processes on 127.0.0.1 (the cost on one node; between nodes add the network's
            latency and bandwidth): the all-reduce of one flat float32 gradient buffer (what Adam
-           hands over per minibatch step, trainer/ppo/adam.py) for the real parameter counts of
+           hands over per minibatch step, trainer/common/adam.py) for the real parameter counts of
            configs/basic.yaml, configs/ball3d.yaml and ball3d with 3 x 512 units; the cost per
            update = per call x minibatch steps per update (num_epoch x buffer_size / batch_size);
            and the per-exchange agreement of trainer/distributed.py (two all-gathers of a few
@@ -35,7 +35,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-# as the trainer runs (trainer/cli.py, trainer/run.py): one BLAS and one torch thread; set before
+# as the trainer runs (trainer/cli.py, trainer/run_setup.py): one BLAS and one torch thread; set before
 # numpy loads (OpenBLAS's second thread busy-waits, which made the first numbers here 10-100x slower)
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
@@ -87,7 +87,7 @@ def update_compute_ms(name: str, cls, hp, repeats: int = 3) -> float:
 
     from protos.types import BehaviorSpec
     from trainer.ppo import numpy_update
-    from trainer.ppo.buffer import Trajectory
+    from trainer.common.trajectory import Trajectory
     from trainer.ppo.trainer import PPOTrainer
 
     hp = dataclasses.replace(hp, buffer_size=20 * hp.batch_size, num_epoch=1)

@@ -58,7 +58,7 @@ def parts():
     from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
     from trainer.artifacts.checkpoints import save_checkpoint
     from trainer.artifacts.onnx_export import export_policy
-    from trainer.ppo.buffer import Trajectory
+    from trainer.common.trajectory import Trajectory
     from trainer.ppo.hyperparams import PPOHyperparams
     from trainer.ppo.trainer import PPOTrainer
 

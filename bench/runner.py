@@ -1,4 +1,4 @@
-"""The runner task (seed 004): completion rate on 100 held-out generated tracks, trained vs untrained.
+"""The runner task (docs/stub-tasks.md): completion rate on 100 held-out generated tracks, trained vs untrained.
 
     .venv/bin/python bench/runner.py --train                 # train configs/runner.yaml (200k steps), then evaluate
     .venv/bin/python bench/runner.py --onnx results/runner/Runner.onnx   # evaluate a run you already have

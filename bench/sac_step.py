@@ -25,9 +25,9 @@ import torch  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from protos.types import BehaviorSpec  # noqa: E402
-from trainer.behavior import sac_hyperparams_from_settings  # noqa: E402
+from trainer.sac.hyperparams import SACHyperparams  # noqa: E402
 from trainer.config.cli_args import parse_run_options  # noqa: E402
-from trainer.ppo.buffer import Trajectory  # noqa: E402
+from trainer.common.trajectory import Trajectory
 from trainer.sac.trainer import SACTrainer  # noqa: E402
 from unity_stub_env.tasks import make_task  # noqa: E402
 
@@ -39,7 +39,7 @@ def build(task: str, numpy: bool) -> tuple[SACTrainer, dict[str, np.ndarray]]:
     brain, _ = stub.behaviors()[0]
     options = parse_run_options([CONFIGS[task]])
     brain = brain.split("?")[0]
-    hp = sac_hyperparams_from_settings(options.behaviors[brain])
+    hp = SACHyperparams.from_settings(options.behaviors[brain])
     spec = BehaviorSpec(tuple(stub.observation_specs), stub.action_spec)
     trainer = SACTrainer(brain, spec, hp, seed=1)
     if not numpy:

@@ -41,8 +41,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from protos import http2  # noqa: E402
-from unity_stub_env.http2_client import request_headers  # noqa: E402
+from trainer.protocol import http2_server  # noqa: E402
 from trainer.protocol.server import EXCHANGE_PATH, MAX_MESSAGE_BYTES, _GrpcioTransport  # noqa: E402
+from unity_stub_env.http2_client import request_headers  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "out"
 PEERS = Path(__file__).resolve().parent / "peers"
@@ -57,7 +58,7 @@ PAYLOADS = {  # name: (request bytes, answer bytes), measured from the stub and 
 
 def make_transport(kind: str, port: int = 0):
     if kind == "http2":
-        return http2.Http2Transport("127.0.0.1", port, EXCHANGE_PATH, MAX_MESSAGE_BYTES)
+        return http2_server.Http2Transport("127.0.0.1", port, EXCHANGE_PATH, MAX_MESSAGE_BYTES)
     if kind == "h2":
         from h2_transport import H2Transport
 
@@ -73,7 +74,7 @@ def make_transport_class(kind: str):
         from h2_transport import H2Transport
 
         return H2Transport
-    return http2.Http2Transport
+    return http2_server.Http2Transport
 
 
 # mlagents-like-learn with the h2-based server swapped in when argv[1] is "h2"
@@ -213,7 +214,7 @@ def bench_protocol(transports: list[str], rounds: int, warmup: int, exchanges: i
                 try:
                     record = protocol.bench_endpoint(task, areas, warmup, exchanges)
                 finally:
-                    server.Http2Transport = http2.Http2Transport
+                    server.Http2Transport = http2_server.Http2Transport
                 rate = record["exchanges"] / record["seconds"]
                 runs = rows.setdefault(f"{kind} {name}", [])
                 runs.append(rate)

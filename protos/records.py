@@ -31,7 +31,7 @@ import numpy as np
 
 from protos import wire
 
-# AgentInfoProto (docs/protocol.md §2): 7 reward f32, 8 done, 9 max_step_reached, 10 id int32,
+# AgentInfoProto (docs/protocol.md, "Message schema"): 7 reward f32, 8 done, 9 max_step_reached, 10 id int32,
 # 11 action_mask repeated bool (packed), 13 observations, 14 group_id int32, 15 group_reward f32
 _F32_FIELDS = (7, 15)
 _VARINT_FIELDS = (8, 9, 10, 14)

@@ -1,4 +1,4 @@
-"""Side channel wire format: message framing and little-endian payload primitives (docs/protocol.md §4.1).
+"""Side channel wire format: message framing and little-endian payload primitives (docs/protocol.md, "Framing").
 
 Framing: the ``side_channel`` field is a concatenation of messages, each
 ``16 bytes channel UUID (uuid.bytes_le, .NET Guid order) | int32 payload length n | n bytes payload``.

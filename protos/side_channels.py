@@ -3,11 +3,11 @@
 Pure encoders and decoders for both directions (trainer side and Unity side), so the trainer and
 ``unity_stub_env`` speak exactly the same bytes. Everything is little-endian.
 
-Framing and payload primitives (docs/protocol.md §4.1) live in ``side_channel_wire`` and are re-exported here,
-so this module is the one import site for both the trainer and ``unity_stub_env``.
+Framing and payload primitives (docs/protocol.md, "Framing") live in ``side_channel_wire`` and are
+re-exported here, so this module is the one import site for both the trainer and ``unity_stub_env``.
 
-Channels (docs/protocol.md §4.2): engine configuration and environment parameters (trainer → Unity), float
-properties (both ways) and stats (Unity → trainer). The trainer sends no training analytics
+Channels (docs/protocol.md, "Known channels"): engine configuration and environment parameters
+(trainer → Unity), float properties (both ways) and stats (Unity → trainer). The trainer sends no training analytics
 (the stub only recognises their channel id). Unknown channel ids are warned about once and skipped.
 """
 from __future__ import annotations
@@ -123,7 +123,7 @@ def encode_env_sampler(key: str, sampler_type: str, seed: int, params) -> bytes:
 
 def encode_env_sequences(key: str, codes, num_labels: int) -> list[bytes]:
     """Label sequences as plain float parameters a Unity game reads with
-    ``EnvironmentParameters.GetWithDefault`` (docs/protocol.md §4.4): ``KEY.count``,
+    ``EnvironmentParameters.GetWithDefault`` (docs/protocol.md, "Label sequences"): ``KEY.count``,
     ``KEY.length``, ``KEY.labels`` (how many labels the model has), then ``KEY.i`` for
     i = k * length + t, the code of label t of sequence k. codes: int [count, length]."""
     codes = np.asarray(codes).reshape(len(codes), -1)

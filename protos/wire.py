@@ -6,8 +6,8 @@ uint8 matrix replaces a Python loop that fills one message object per agent. Rec
 different lengths are built as one matrix of the longest layout, and a byte mask drops what
 each record leaves out.
 
-Field layouts used here (proto3, docs/protocol.md §2): packed repeated scalars are ``tag(LEN), byte length,
-values``; a float is ``tag(I32)`` + 4 little-endian bytes; a varint field is ``tag(VARINT)`` +
+Field layouts used here (proto3, docs/protocol.md, "Message schema"): packed repeated scalars are
+``tag(LEN), byte length, values``; a float is ``tag(I32)`` + 4 little-endian bytes; a varint field is ``tag(VARINT)`` +
 the shortest varint (``varint_columns`` for a column of integers).
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""One brain's training state in a run: its trainer (PPO or SAC), settings, summaries and checkpoints.
+"""One brain's training state in a run: its trainer (PPO, SAC or POCA), settings, summaries and checkpoints.
 
 The run loop (trainer/run.py) owns the simulators and the data flow; a ``BehaviorRunner`` owns
 what belongs to one brain name: when to summarise, when to checkpoint, what to write where.
@@ -21,93 +21,36 @@ from trainer import crash_points
 from trainer.artifacts.checkpoints import CheckpointError, checkpoint_step, load_checkpoint, save_checkpoint
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
 from trainer.errors import ConfigError, UserError
-from trainer.ppo.buffer import Trajectory
-from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
+from trainer.common.trainer_interface import Trainer
+from trainer.common.trajectory import Trajectory
+from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer
 from trainer.selfplay import ELO_STAT, SelfPlay, TeamController
 
 logger = logging.getLogger("mlagents_like")
 
 
-def hyperparams_from_settings(settings) -> PPOHyperparams:
-    """Map a behavior's TrainerSettings (trainer/config) onto the PPO room's own dataclass."""
-    h = settings.hyperparameters
-    n = settings.network_settings
-    return PPOHyperparams(  # POCA's settings are PPO's without shared_critic
-        batch_size=h.batch_size,
-        buffer_size=h.buffer_size,
-        learning_rate=h.learning_rate,
-        beta=h.beta,
-        epsilon=h.epsilon,
-        lambd=h.lambd,
-        num_epoch=h.num_epoch,
-        shared_critic=getattr(h, "shared_critic", False),
-        learning_rate_schedule=h.learning_rate_schedule,
-        beta_schedule=h.beta_schedule,
-        epsilon_schedule=h.epsilon_schedule,
-        max_steps=settings.max_steps,
-        normalize=n.normalize,
-        hidden_units=n.hidden_units,
-        num_layers=n.num_layers,
-        vis_encode_type=n.vis_encode_type,
-        deterministic=n.deterministic,
-        memory_size=n.memory.memory_size if n.memory is not None else 0,
-        sequence_length=n.memory.sequence_length if n.memory is not None else 64,
-        reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
-        reward_signal_networks=signal_networks(settings),
-    )
-
-
-def signal_networks(settings) -> dict[str, SignalNetwork]:
-    """Each intrinsic reward signal's own network settings (PPO and SAC alike)."""
-    return {
-        name: SignalNetwork(learning_rate=rs.learning_rate, hidden_units=rs.network_settings.hidden_units,
-                            num_layers=rs.network_settings.num_layers,
-                            normalize=rs.network_settings.normalize,
-                            vis_encode_type=rs.network_settings.vis_encode_type,
-                            use_actions=getattr(rs, "use_actions", False), use_vail=getattr(rs, "use_vail", False))
-        for name, rs in settings.reward_signals.items() if name != "extrinsic"
-    }
-
-
-def sac_hyperparams_from_settings(settings) -> "SACHyperparams":
-    """Map a ``trainer_type: sac`` behavior's TrainerSettings onto the SAC room's dataclass."""
-    from trainer.sac.hyperparams import SACHyperparams
-
-    h = settings.hyperparameters
-    n = settings.network_settings
-    return SACHyperparams(
-        batch_size=h.batch_size, buffer_size=h.buffer_size, learning_rate=h.learning_rate,
-        learning_rate_schedule=h.learning_rate_schedule, buffer_init_steps=h.buffer_init_steps, tau=h.tau,
-        steps_per_update=h.steps_per_update, save_replay_buffer=h.save_replay_buffer,
-        init_entcoef=h.init_entcoef, reward_signal_steps_per_update=h.reward_signal_steps_per_update,
-        max_steps=settings.max_steps, normalize=n.normalize, hidden_units=n.hidden_units,
-        num_layers=n.num_layers, vis_encode_type=n.vis_encode_type, deterministic=n.deterministic,
-        memory_size=n.memory.memory_size if n.memory is not None else 0,
-        sequence_length=n.memory.sequence_length if n.memory is not None else 64,
-        reward_signals={name: (rs.gamma, rs.strength) for name, rs in settings.reward_signals.items()},
-        reward_signal_networks=signal_networks(settings),
-    )
-
-
-def make_trainer(brain: str, spec: BehaviorSpec, settings, seed: int, device: str, use_numpy_update: bool):
+def make_trainer(brain: str, spec: BehaviorSpec, settings, seed: int, device: str, use_numpy_update: bool
+                 ) -> Trainer:
     """The trainer of ``settings.trainer_type`` (the config refuses the types not trained here)."""
     if settings.trainer_type == "sac":
+        from trainer.sac.hyperparams import SACHyperparams
         from trainer.sac.trainer import SACTrainer
 
-        trainer = SACTrainer(brain, spec, sac_hyperparams_from_settings(settings), seed=seed, device=device)
+        trainer = SACTrainer(brain, spec, SACHyperparams.from_settings(settings), seed=seed, device=device,
+                             use_numpy_update=use_numpy_update)
     elif settings.trainer_type == "poca":
         from trainer.poca.trainer import POCATrainer
 
-        trainer = POCATrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device)
+        trainer = POCATrainer(brain, spec, PPOHyperparams.from_settings(settings), seed=seed, device=device)
     else:
-        trainer = PPOTrainer(brain, spec, hyperparams_from_settings(settings), seed=seed, device=device,
+        trainer = PPOTrainer(brain, spec, PPOHyperparams.from_settings(settings), seed=seed, device=device,
                              use_numpy_update=use_numpy_update)
     attach_demonstrations(trainer, brain, spec, settings, seed)
     return trainer
 
 
-def attach_demonstrations(trainer, brain: str, spec: BehaviorSpec, settings, seed: int) -> None:
+def attach_demonstrations(trainer: Trainer, brain: str, spec: BehaviorSpec, settings, seed: int) -> None:
     """behavioral_cloning's learner and GAIL's expert data, from their demo_path (read once per
     path); ConfigError (exit 2) if a demonstration does not fit the behavior."""
     from trainer.demonstrations import demo_paths, load_demonstrations
@@ -118,13 +61,10 @@ def attach_demonstrations(trainer, brain: str, spec: BehaviorSpec, settings, see
             loaded[path] = load_demonstrations(path, spec, f"behaviors.{brain}.{key}")
     bc = settings.behavioral_cloning
     gail = settings.reward_signals.get("gail")
-    provider = getattr(trainer, "providers", {}).get("gail")
-    # a trainer that would ignore them (it has no hook for cloning, no GAIL provider) must not train quietly without
-    for wanted, missing, key in ((bc, not hasattr(trainer, "behavioral_cloning"), "behavioral_cloning"),
-                                 (gail, provider is None, "reward_signals.gail")):
-        if wanted is not None and missing:
-            raise ConfigError(f"behaviors.{brain}.{key}: not implemented for trainer_type "
-                              f"{settings.trainer_type} yet; remove it or use trainer_type ppo")
+    provider = trainer.providers.get("gail")
+    if gail is not None and provider is None:  # a trainer that built no GAIL learner must not train without it
+        raise ConfigError(f"behaviors.{brain}.reward_signals.gail: not implemented for trainer_type "
+                          f"{settings.trainer_type} yet; remove it or use trainer_type ppo")
     if bc is not None:
         from trainer.behavioral_cloning import BehavioralCloning
 
@@ -177,7 +117,7 @@ class BehaviorRunner:
     brain: str
     spec: BehaviorSpec
     settings: object  # TrainerSettings
-    trainer: PPOTrainer  # or trainer.sac.trainer.SACTrainer (same interface)
+    trainer: Trainer  # PPO, SAC or POCA (trainer/common/trainer_interface.py)
     paths: CheckpointPaths
     training: bool
     next_summary: int = 0
@@ -231,7 +171,7 @@ class BehaviorRunner:
                 if os.path.isfile(self.paths.replay_buffer):
                     self.trainer.load_replay_buffer(self.paths.replay_buffer)
                     logger.info("Loaded the replay buffer of behavior %s (%d experiences) from %s.",
-                                self.brain, len(self.trainer.buffer), self.paths.replay_buffer)
+                                self.brain, self.trainer.replay_buffer_size(), self.paths.replay_buffer)
                 else:
                     logger.warning("No replay buffer at %s: behavior %s starts with an empty one.",
                                    self.paths.replay_buffer, self.brain)
@@ -284,7 +224,7 @@ class BehaviorRunner:
         files of later steps (a checkpoint the killed run had not finished, or a damaged one) and
         orphan halves (a .pt without its .onnx or the reverse) are removed, the resumed step's
         missing .onnx is exported again, and checkpoints beyond keep_checkpoints are deleted
-        (leftover temp files went earlier: ``trainer.run.prepare_run_dir``)."""
+        (leftover temp files went earlier: ``trainer.results_dir.prepare_run_dir``)."""
         step = self.trainer.step
         removed: list[str] = []
         on_disk = self.paths.steps_on_disk()
@@ -344,7 +284,7 @@ class BehaviorRunner:
 
     @property
     def saves_replay_buffer(self) -> bool:
-        return bool(getattr(self.settings.hyperparameters, "save_replay_buffer", False))
+        return self.trainer.saves_replay_buffer
 
     @property
     def max_steps(self) -> int:

@@ -35,11 +35,11 @@ import numpy as np
 import torch
 
 from trainer.demonstrations import DemoExperiences
-from trainer.ppo.adam import Adam
-from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
+from trainer.common.adam import Adam
+from trainer.common.schedules import LEARNING_RATE_FLOOR, decay
 
 DEFAULT_NUM_EPOCH = 3  # the reference's, for PPO and SAC alike
-CONTINUOUS_CLIP = 3.0  # PPO's actions reach the environment as clamp(a, -3, 3) / 3 (trainer/ppo/policy.py)
+CONTINUOUS_CLIP = 3.0  # PPO's actions reach the environment as clamp(a, -3, 3) / 3 (trainer/common/policy.py)
 
 
 class BehavioralCloning:

@@ -115,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
         if hasattr(signal, "SIGXFSZ"):  # past `ulimit -f` a write fails with EFBIG (one message), no core dump
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         if options.capture_spec is not None:
-            from trainer.run import capture_spec
+            from trainer.capture import capture_spec
 
             return capture_spec(options, env_vars)
         from trainer.run import run_training

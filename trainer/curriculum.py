@@ -1,4 +1,5 @@
-"""Which lesson every environment parameter is in, and when it advances (docs/configuration.md §6.7).
+"""Which lesson every environment parameter is in, and when it advances (docs/configuration.md,
+"environment_parameters").
 
 The run's curriculum state; the settings it works from (samplers, lessons, completion criteria)
 are the frozen ``trainer.config.env_params`` types read from the YAML.
@@ -47,7 +48,8 @@ def criteria_met(
 class EnvironmentParameterManager:
     """Holds the lesson index of every parameter and advances lessons from trainer statistics.
 
-    params: the run's environment parameters; seeds of -1 are resolved from ``run_seed`` (docs/protocol.md §4.3).
+    params: the run's environment parameters; seeds of -1 are resolved from ``run_seed``
+    (docs/protocol.md, "Sampler seeds").
     restore_lessons: lesson numbers read from ``training_status.json`` on --resume.
     """
 
@@ -145,5 +147,5 @@ class EnvironmentParameterManager:
         return f"Parameter '{name}' is in lesson '{lesson.name}' and has value '{lesson.value}'."
 
     def describe(self) -> list[str]:
-        """One console line per parameter, in configuration order (docs/outputs.md §7 Console item 6)."""
+        """One console line per parameter, in configuration order (docs/outputs.md, "Console", item 6)."""
         return [self.describe_parameter(name) for name in self.settings]

@@ -1,5 +1,5 @@
 """Demonstrations as experiences: a ``.demo`` file (or folder) read into numpy columns for
-behavioral cloning (trainer/behavioral_cloning.py) and GAIL (trainer/ppo/reward_providers.py).
+behavioral cloning (trainer/behavioral_cloning.py) and GAIL (trainer/common/reward_providers.py).
 
 The file format is ``protos.demo_file``'s; the agent infos go through the trainer's one codec
 (``codec.agent_fields``), exactly as they would arrive on the wire. Pairing, as the reference

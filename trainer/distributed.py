@@ -13,11 +13,11 @@ single-process rule, and torch.distributed is never imported.
 What stays identical on every rank, and how:
   * weights, optimiser moments, step: rank 0's brain is broadcast to the others when every rank
     knows the brain (``_join``); from then on the same averaged gradients (``average_``, called
-    by Adam on its one flat gradient buffer per minibatch step: trainer/ppo/adam.py) and the
+    by Adam on its one flat gradient buffer per minibatch step: trainer/common/adam.py) and the
     same Adam arithmetic keep them bit-identical;
   * the step count is global: each rank's new experiences are summed at every exchange;
   * observation normalisers: each rank only accumulates its new observations' sums
-    (trainer/ppo/normalizer.py ``defer``); ``agree`` adds every rank's sums and all ranks fold
+    (trainer/common/normalizer.py ``defer``); ``agree`` adds every rank's sums and all ranks fold
     the same total in. (Alone, the normaliser updates at once, per trajectory, as ML-Agents.)
   * when to update: when EVERY rank's buffer holds more than buffer_size (per rank) experiences;
     all take the minibatches of the smallest buffer (PPOTrainer.update's ``rows``);

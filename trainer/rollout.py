@@ -8,7 +8,7 @@ written and the row counted. Episode ids map to slots through a sorted index (se
 so Python touches an agent only when its episode starts or a trajectory is emitted (once per
 ``time_horizon`` steps or episode end), not every step.
 
-Rules (docs/ppo.md §10 "Experience assembly"):
+Rules (docs/ppo.md, "Experience assembly"):
 - the reward that arrives with observation t+1 is paired with the observation and action of t;
   the reward on an agent's very first decision of an episode is dropped;
 - extrinsic reward = reward + group_reward;
@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from protos.types import BehaviorSpec, DecisionSteps, TerminalSteps
-from trainer.ppo.buffer import GroupColumns, Trajectory
+from trainer.common.trajectory import GroupColumns, Trajectory
 
 
 @dataclass

@@ -1,4 +1,5 @@
-"""The one training loop: simulators → decisions → trajectories → PPO updates → outputs.
+"""The one training loop: simulators → decisions → trajectories → updates of each behavior's
+trainer (PPO, SAC or POCA) → outputs.
 
 Per iteration (each simulator has just sent its message):
   1. new behaviors get a ``BehaviorRunner`` (trainer, checkpoint bookkeeping);
@@ -6,25 +7,26 @@ Per iteration (each simulator has just sent its message):
      envs (the brain's policy, or with self-play a team's snapshot: ``BehaviorRunner.policy_for``);
   3. the actions go out at once, so the simulators step while we work;
   4. meanwhile every agent's experience is assembled (rollout.AgentTracker), trajectories go to
-     PPO (GAE, update when the buffer is full), summaries, checkpoints, curriculum; then we wait
-     for the simulators' next messages.
+     the behavior's trainer (which updates when it has enough), summaries, checkpoints,
+     curriculum; then we wait for the simulators' next messages.
+
+Its helpers: the results folder (results_dir.py), the side-channel payloads
+(side_channel_payloads.py), the checks and settings made before the loop (run_setup.py);
+``--capture-spec`` runs capture.py instead.
 """
 from __future__ import annotations
 
-import ipaddress
 import logging
 import os
-import re
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from protos import side_channels as sc
-from protos.types import ActionTuple, StatsAggregationMethod, StepResult, brain_name_of
+from protos.types import ActionTuple, DecisionSteps, StatsAggregationMethod, StepResult, TerminalSteps, brain_name_of
 from trainer import crash_points
 from trainer.artifacts.atomic import WRITE_ERRNOS, results_write_error
 from trainer.artifacts.behaviors import BehaviorRecorder
@@ -33,18 +35,22 @@ from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, PROPERTY_SELF_PLAY
 from trainer.artifacts.tensorboard import TensorboardWriter
 from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
-from trainer.config.env_params import ConstantSampler, HmmSampler, hmm_model, hmm_sequences
 from trainer.config.env_vars import EnvVars
 from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
 from trainer.config.support import goal_conditioning_note
 from trainer.curriculum import EnvironmentParameterManager
 from trainer.distributed import RankLost, Ranks
-from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
-from trainer.errors import ConfigError, ResultsWriteError, UnityCommunicatorStoppedError, UserError
+from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool
+from trainer.errors import ResultsWriteError, UnityCommunicatorStoppedError
 from trainer.protocol.codec import NON_FINITE_STAT
+from trainer.results_dir import prepare_run_dir, run_dir_of
 from trainer.rollout import AgentTracker, GroupTracker, concat_masks
+from trainer.run_setup import (
+    behavior_recorder, check_torch_device, configure_torch_threads, pool_settings_of, warn_if_not_loopback,
+)
 from trainer.selfplay import TeamController
+from trainer.side_channel_payloads import engine_config_messages, environment_parameter_messages, make_routers
 from trainer.stop import EXIT_STOPPED, STOP
 
 if TYPE_CHECKING:  # torch is imported only once the simulators are launched (see run_training)
@@ -53,115 +59,27 @@ if TYPE_CHECKING:  # torch is imported only once the simulators are launched (se
 logger = logging.getLogger("mlagents_like")
 
 
-# --------------------------------------------------------------------------------- results dir
-def run_dir_of(options) -> str:
-    ck = options.checkpoint_settings
-    return os.path.join(ck.results_dir, ck.run_id)
+class EnvRows(NamedTuple):
+    """One simulator's part of a behavior's step: its deciding agents are rows ``rows`` of the
+    behavior's one batched forward pass."""
+
+    env_id: int
+    decision: DecisionSteps
+    terminal: TerminalSteps
+    rows: slice
 
 
-_STARTUP_FILES = re.compile(r"configuration\.yaml|run_logs/(timers\.json|training_status\.json|behaviors\.json|Player-\d+\.log)")
+class Decision(NamedTuple):
+    """What ``RunState.decide`` did for one behavior, handed to ``RunState.record`` once the
+    actions are sent. ``out`` (the policy's output), ``masks`` and ``memories`` are None when no
+    agent of the behavior decided this step (only terminal steps arrived)."""
 
-
-def only_startup_files(run_dir: str) -> bool:
-    """True if ``run_dir`` holds nothing but what a run writes before its first step (the
-    configuration, timers, training status, simulator logs) and no checkpoint, model or
-    TensorBoard data: every run that trained leaves those (Ctrl-C and a simulator that stops
-    included; they end with a final checkpoint)."""
-    for folder, _, files in os.walk(run_dir):
-        for name in files:
-            relative = os.path.relpath(os.path.join(folder, name), run_dir).replace(os.sep, "/")
-            if not _STARTUP_FILES.fullmatch(relative):
-                return False
-    return True
-
-
-def prepare_run_dir(options) -> str:
-    """results/<run-id>: refuse to clobber an earlier run unless --resume or --force."""
-    ck = options.checkpoint_settings
-    run_dir = run_dir_of(options)
-    exists = os.path.isdir(run_dir) and bool(os.listdir(run_dir))
-    if not exists and ck.resume:
-        raise UserError(f"--resume was given but {run_dir} does not exist. Start a new run without --resume.")
-    if exists and not (ck.resume or ck.force or ck.inference):
-        if not only_startup_files(run_dir):
-            raise UserError(
-                f"Previous data from this run ID was found in {run_dir}. Either use --resume to continue "
-                "that run, --force to overwrite it, or pick another --run-id."
-            )
-        # e.g. a simulator that failed at start: nothing to lose
-        logger.info("%s holds only the files of an earlier start that never trained; using it again.", run_dir)
-    try:
-        os.makedirs(os.path.join(run_dir, "run_logs"), exist_ok=True)
-        for folder, _, _ in os.walk(run_dir):  # a folder we cannot write stops us now, not mid-run
-            tempfile.TemporaryFile(dir=folder).close()
-    except OSError as error:
-        if error.errno in WRITE_ERRNOS:
-            raise results_write_error(error.filename or run_dir, error) from None
-        raise
-    if ck.resume:
-        remove_leftover_temp_files(run_dir)
-    return run_dir
-
-
-# the temp files of trainer.artifacts.atomic (tempfile.mkstemp: 8 random letters, digits or _)
-_LEFTOVER_TMP = re.compile(r"\..+-[A-Za-z0-9_]{8}\.tmp")
-
-
-def remove_leftover_temp_files(run_dir: str) -> None:
-    """--resume: delete the temp files of writes a killed run did not finish (never read)."""
-    removed = []
-    for folder, _, files in os.walk(run_dir):
-        for name in files:
-            if _LEFTOVER_TMP.fullmatch(name):
-                os.remove(os.path.join(folder, name))
-                removed.append(os.path.relpath(os.path.join(folder, name), run_dir))
-    if removed:
-        logger.info("Removed %d unfinished temp file(s) of the previous run: %s", len(removed), ", ".join(removed))
-
-
-def warn_if_not_loopback(bind: str, ports: str) -> None:
-    """One warning when the server listens beyond this machine: the gRPC protocol of Unity ML-Agents
-    has no authentication, so whoever reaches the port can connect as a simulator."""
-    host = bind.strip().strip("[]")
-    if host == "localhost":
-        return
-    try:
-        if ipaddress.ip_address(host).is_loopback:
-            return
-    except ValueError:
-        pass
-    logger.warning(
-        "--bind %s: the trainer listens beyond this machine on port(s) %s. Unity simulators cannot "
-        "authenticate, so anyone who can reach these ports can connect and send steps. Keep the default "
-        "127.0.0.1 and reach simulators on other nodes through an SSH tunnel or a private network "
-        "(README: Simulators on other machines).", bind, ports)
-
-
-def environment_parameter_messages(manager: EnvironmentParameterManager) -> list[tuple]:
-    msgs = []
-    for key, sampler in manager.current_samplers().items():
-        if isinstance(sampler, HmmSampler):
-            codes = hmm_sequences(sampler)
-            num_labels = hmm_model(sampler).num_labels
-            msgs += [(sc.ENVIRONMENT_PARAMETERS_CHANNEL_ID, payload)
-                     for payload in sc.encode_env_sequences(key, codes, num_labels)]
-            continue
-        if isinstance(sampler, ConstantSampler):
-            payload = sc.encode_env_float(key, sampler.value)
-        elif sampler.sampler_type == "uniform":
-            payload = sc.encode_env_sampler(key, "uniform", sampler.seed, (sampler.min_value, sampler.max_value))
-        elif sampler.sampler_type == "gaussian":
-            payload = sc.encode_env_sampler(key, "gaussian", sampler.seed, (sampler.mean, sampler.st_dev))
-        else:
-            payload = sc.encode_env_sampler(key, "multirangeuniform", sampler.seed, sampler.intervals)
-        msgs.append((sc.ENVIRONMENT_PARAMETERS_CHANNEL_ID, payload))
-    return msgs
-
-
-def engine_config_messages(engine) -> list[tuple]:
-    payloads = sc.encode_engine_config(engine.width, engine.height, engine.quality_level, engine.time_scale,
-                                       engine.target_frame_rate, engine.capture_frame_rate)
-    return [(sc.ENGINE_CONFIG_CHANNEL_ID, p) for p in payloads]
+    runner: BehaviorRunner
+    behavior: str
+    steps: list[EnvRows]
+    out: Any  # PolicyOutput (trainer/common/policy.py)
+    masks: np.ndarray | None  # bool [n, sum(branches)], True = masked
+    memories: np.ndarray | None  # float32 [n, memory_size]: the LSTM state each agent acted from
 
 
 # --------------------------------------------------------------------------------- the loop
@@ -231,14 +149,14 @@ class RunState:
         return runner
 
     # ------------------------------------------------------------------ decisions
-    def decide(self, results: list[StepResult]) -> tuple[list[dict[str, ActionTuple]], list]:
+    def decide(self, results: list[StepResult]) -> tuple[list[dict[str, ActionTuple]], list[Decision]]:
         """Actions for every deciding agent: ONE forward pass per behavior across all envs.
 
         Returns (actions per env, the decisions to ``record`` once the actions are sent). Nothing
         here touches the experience trackers, so the simulators wait only for the policy.
         """
         actions: list[dict[str, ActionTuple]] = [{} for _ in results]
-        decided: list = []
+        decided: list[Decision] = []
         by_behavior: dict[str, list[int]] = {}
         for env_id, res in enumerate(results):
             for behavior in res.steps:
@@ -250,21 +168,21 @@ class RunState:
             steps, start = [], 0
             for env_id in env_ids:
                 decision, terminal = results[env_id].steps[behavior]
-                steps.append((env_id, decision, terminal, slice(start, start + len(decision))))
+                steps.append(EnvRows(env_id, decision, terminal, slice(start, start + len(decision))))
                 start += len(decision)
             out = masks = memories = None
             if start:
-                out, masks, memories = self._act(runner, policy, behavior, [s for s in steps if len(s[1])])
+                out, masks, memories = self._act(runner, policy, behavior, [s for s in steps if len(s.decision)])
                 for env_id, decision, _, rows in steps:
                     if len(decision):
                         actions[env_id][behavior] = ActionTuple(out.env_actions.continuous[rows],
                                                                 out.env_actions.discrete[rows])
-            decided.append((runner, behavior, steps, out, masks, memories))
+            decided.append(Decision(runner, behavior, steps, out, masks, memories))
         return actions, decided
 
-    def _act(self, runner: BehaviorRunner, policy, behavior: str, steps: list):
-        """One forward pass of ``policy`` for the deciding agents of ``steps`` (each env's (env_id,
-        decision, terminal, rows)). Returns (policy output, masks, the memories it started from or None)."""
+    def _act(self, runner: BehaviorRunner, policy, behavior: str, steps: list[EnvRows]):
+        """One forward pass of ``policy`` for the deciding agents of ``steps``. Returns (policy
+        output, masks, the memories it started from or None)."""
         spec = runner.spec
         branches = spec.action_spec.discrete_branches
         deciding = [decision for _, decision, _, _ in steps]
@@ -288,12 +206,12 @@ class RunState:
     def _tracker(self, env_id: int, behavior: str, runner: BehaviorRunner) -> AgentTracker:
         tracker = self.trackers.get((env_id, behavior))
         if tracker is None:
-            kind = GroupTracker if getattr(runner.trainer, "uses_groups", False) else AgentTracker  # POCA
+            kind = GroupTracker if runner.trainer.uses_groups else AgentTracker  # POCA
             tracker = kind(runner.spec, runner.settings.time_horizon, memory_size=runner.trainer.policy.memory_size)
             self.trackers[(env_id, behavior)] = tracker
         return tracker
 
-    def record(self, decided: list, trajectories: list) -> None:
+    def record(self, decided: list[Decision], trajectories: list) -> None:
         """Experience assembly for the decisions of ``decide`` (after their actions went out):
         rewards paired with the previous actions, finished trajectories appended to
         ``trajectories``, the new observations and actions remembered, episode statistics."""
@@ -464,111 +382,6 @@ class RunState:
             rewards = r.reward_buffer
             self.progress.update(r.brain, r.trainer.step, r.max_steps if r.training else None,  # inference: no end
                                  float(np.mean(list(rewards)[-100:])) if rewards else None)
-
-
-def make_routers(num_envs: int) -> list[sc.SideChannelRouter]:
-    """One side-channel router per simulator; an unknown channel id is warned about once per run."""
-    warned: set = set()
-    return [sc.SideChannelRouter(warned) for _ in range(num_envs)]
-
-
-def configure_torch_threads(threads: int) -> None:
-    """``threads`` intra-op threads: one unless MLAGENTS_LIKE_TORCH_THREADS says otherwise. The
-    simulators run in other processes on the same cores, and for the small networks RL uses,
-    torch's thread pool costs more in hand-offs than it gains (measured: act for 256 agents
-    3.2 ms with 2 threads, 0.8 ms with 1 on a 2-core machine)."""
-    import torch
-
-    torch.set_num_threads(threads)
-
-
-def check_torch_device(device: str | None) -> None:
-    """A --torch-device (torch_settings.device) that torch cannot parse or this machine cannot
-    use is a user error, reported before the first network is built on it. None means the CPU."""
-    if device is None:
-        return
-    import torch
-
-    try:
-        torch.zeros(1, device=torch.device(device))
-    except (RuntimeError, AssertionError, ValueError) as error:
-        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
-        raise ConfigError(
-            f"--torch-device / torch_settings.device {device!r} cannot be used here ({reason}). "
-            f"Use cpu, or a device this torch build and machine have (cuda / cuda:N needs a CUDA "
-            f"build of torch and a GPU)."
-        ) from error
-
-
-def pool_settings_of(options, env_vars: EnvVars) -> PoolSettings:
-    env = options.env_settings
-    rank, world = env_vars.ranks.rank, env_vars.ranks.world_size
-    if world > 1 and not env.env_path:
-        raise UserError(f"{world} data-parallel ranks need --env: each rank launches its own simulators "
-                        "(the Unity Editor is one environment).")
-    configured = [options.default_settings, *options.behaviors.values()]
-    not_ppo = sorted({s.trainer_type for s in configured if s is not None and s.trainer_type != "ppo"})
-    if world > 1 and not_ppo:
-        raise UserError(f"{world} data-parallel ranks average PPO gradients only; this config uses "
-                        f"trainer_type {', '.join(not_ppo)}. Run it as one rank (srun -n 1, or without "
-                        "torchrun), or use PPO (docs/cluster.md).")
-    if world > 1 and any(s is not None and s.self_play is not None for s in configured):
-        raise UserError(f"{world} data-parallel ranks cannot share one self-play schedule; run a config with "
-                        "self_play as one rank (srun -n 1, or without torchrun).")
-    return PoolSettings(
-        env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
-        num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,
-        bind=env.bind, no_graphics=options.engine_settings.no_graphics,
-        no_graphics_monitor=options.engine_settings.no_graphics_monitor,
-        log_folder=os.path.abspath(os.path.join(run_dir_of(options), "run_logs")),
-        max_lifetime_restarts=env.max_lifetime_restarts, restarts_rate_limit_n=env.restarts_rate_limit_n,
-        restarts_rate_limit_period_s=env.restarts_rate_limit_period_s, debug=options.debug,
-        spin_wait_s=env_vars.spin_wait_s, transport=env_vars.transport, first_worker=rank * env.num_envs,
-    )
-
-
-def behavior_recorder(options) -> BehaviorRecorder:
-    env = options.env_settings
-    return BehaviorRecorder(env.num_areas, env.env_path or "editor", tuple(options.environment_parameters))
-
-
-CAPTURE_STEPS = 20  # exchanges --capture-spec watches before it writes the file
-
-
-def capture_spec(options, env_vars: EnvVars | None = None, steps: int = CAPTURE_STEPS) -> int:
-    """``--capture-spec FILE``: connect to the simulator(s), step ``steps`` times with zero
-    actions, write what was seen to FILE (docs/mirror.md) and exit without training."""
-    env_vars = env_vars or EnvVars()
-    path = options.capture_spec
-    params = EnvironmentParameterManager(options.environment_parameters, options.env_settings.seed, {})
-    side_channel = sc.pack_messages(environment_parameter_messages(params)
-                                    + engine_config_messages(options.engine_settings))
-    pool = EnvPool(pool_settings_of(options, env_vars), initial_side_channel=lambda: side_channel)
-    recorder = behavior_recorder(options)
-    routers = make_routers(pool.num_envs)
-    try:
-        pool.start()
-        results = pool.reset(side_channel)
-        for _ in range(steps):
-            STOP.check()
-            recorder.observe(results)
-            for router, res in zip(routers, results):
-                if res.side_channel:
-                    recorder.observe_stats(key for key, _, _ in router.dispatch(res.side_channel).stats)
-            results = pool.step([{} for _ in results], b"").results
-        recorder.observe(results)
-    except KeyboardInterrupt:
-        logger.info("Stopped before the capture finished; nothing written.")
-        return EXIT_STOPPED
-    finally:
-        pool.close()
-    if not recorder.write(path):
-        raise UserError(f"--capture-spec: the simulator sent no agent in {steps} steps, so there is no "
-                        "behavior spec to record; check that the scene's agents request decisions.")
-    spec = recorder.spec_file()
-    logger.info("Wrote the specs of %d behavior(s) to %s: %s", len(spec.behaviors), path,
-                ", ".join(f"{b.name} ({b.agents} agents)" for b in spec.behaviors))
-    return 0
 
 
 def run_training(options, env_vars: EnvVars | None = None) -> int:

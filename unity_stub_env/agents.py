@@ -20,7 +20,7 @@ from protos.communicator_objects import (
 from protos.types import ActionSpec, ObservationSpec
 
 
-# AgentInfoProto fields (docs/protocol.md §2) in number order: reward 7 (float), done 8, max_step_reached 9,
+# AgentInfoProto fields (docs/protocol.md, "Message schema") in number order: reward 7 (float), done 8, max_step_reached 9,
 # id 10 (varints), action_mask 11 (packed bools), observations 13
 _REWARD, _ID = wire.tag(7, wire.I32), wire.tag(10, wire.VARINT)
 _DONE_TRUE, _MAX_STEP_TRUE = wire.tag(8, wire.VARINT) + b"\x01", wire.tag(9, wire.VARINT) + b"\x01"
@@ -199,7 +199,7 @@ def _observation_frame(spec: ObservationSpec) -> tuple[bytes, bytes]:
 
 def _png_fields(spec: ObservationSpec, observations: np.ndarray) -> list[bytes]:
     """One serialized PNG ObservationProto (field 13) per agent for a C x H x W camera in [0, 1]
-    (docs/protocol.md §3.3): 1 channel as a gray RGB PNG, 3 as RGB, any other count as RGB PNGs
+    (docs/protocol.md, "Observation payloads"): 1 channel as a gray RGB PNG, 3 as RGB, any other count as RGB PNGs
     of 3 channels each, concatenated, with ``compressed_channel_mapping`` (-1 for padding)."""
     channels = spec.shape[0]
     mapping = [] if channels in (1, 3) else [c if c < channels else -1 for c in range(3 * -(-channels // 3))]

@@ -1,6 +1,6 @@
 """The gRPC side of a Unity player: a CLIENT that calls ``Exchange`` like ``RpcCommunicator.cs``.
 
-Handshake (docs/protocol.md §1.5): M1 carries the academy's init output (no brain parameters, no rl_output);
+Handshake (docs/protocol.md, "Handshake, message by message"): M1 carries the academy's init output (no brain parameters, no rl_output);
 the answer holds the trainer's seed, num_areas and versions. M2 is a bare status-200 header;
 its answer is the first RESET. Every later message carries ``rl_output`` (agent infos keyed by
 ``Behavior?team=0`` plus side-channel bytes) and, the first time a behavior is sent with at

@@ -19,15 +19,14 @@ Two trainers, both with random restarts that keep the best log-likelihood:
       Ā' = Ā ⊙ (B R Bᵀ)                   normalised over the whole matrix
       B' = B ⊙ (Ā B Rᵀ + Āᵀ B R)           normalised per state (the docs' "per column")
 
-  The thesis prints the emission update as ``B ⊙ (R Āᵀ + Rᵀ B Ā)``; the first term has lost a
-  B (its shapes do not even multiply). The gradient of Σ C log C̄ has both B's, and so does the
-  thesis' own code; we use that. Each iteration is O(M²N + MN²); with the O(T) counting the
-  whole cost is O(I·M²·N + T) (bench/hmm.py measures it). The updates ignore π; after
-  training A is Ā with rows normalised and π is Ā's row sums (the stationary state marginal,
-  our choice: the thesis uses π only to pick the first state). The objective it maximises, and
-  the log-likelihood its restarts compare, is the pair log-likelihood Σ C_kl log C̄_kl
-  (counts, not normalised): computing the sequence log-likelihood instead would cost the
-  O(N²T) the method avoids.
+  The runner thesis (docs/stub-tasks.md, "Seed projects") prints the emission update as
+  ``B ⊙ (R Āᵀ + Rᵀ B Ā)``; the first term has lost a B (its shapes do not even multiply). The gradient
+  of Σ C log C̄ has both B's, and so does the thesis' own code; we use that. Each iteration is O(M²N + MN²); with the O(T)
+  counting the whole cost is O(I·M²·N + T) (bench/hmm.py measures it). The updates ignore π; after
+  training A is Ā with rows normalised and π is Ā's row sums (the stationary state marginal, our choice:
+  the thesis uses π only to pick the first state). The objective it maximises, and the log-likelihood
+  its restarts compare, is the pair log-likelihood Σ C_kl log C̄_kl (counts, not normalised): computing
+  the sequence log-likelihood instead would cost the O(N²T) the method avoids.
 * ``baum-welch`` -- scaled forward-backward EM on every line of the corpus, O(I·N²·T). Its
   log-likelihood (Σ log of the scale factors) never decreases; tests check that.
 

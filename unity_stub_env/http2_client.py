@@ -2,7 +2,7 @@
 
 What a simulator needs to call ``Exchange`` like Unity's gRPC client does, without gRPC's
 threads (grpcio's client is the other choice, ``communicator._GrpcioChannel``). The framing
-(frames, HPACK helpers, limits) is shared with the trainer's server in ``protos/http2.py``.
+(frames, HPACK helpers, limits) is protos/http2.py, which the trainer's server uses too.
 
     channel = Http2Channel("localhost", 5005, b"/pkg.Service/Method")
     channel.connect(timeout=1.0)       # False while nothing listens
@@ -20,7 +20,7 @@ from protos.http2 import (
     ACK, CANCEL, CONTINUATION, DATA, DEFAULT_WINDOW, END_HEADERS, END_STREAM, FRAME_SIZE_ERROR, GOAWAY,
     GRPC_OK, HEADERS, MAX_WINDOW, NO_ERROR, OUR_MAX_FRAME, PING, PREFACE, PRIORITY_FLAG, RST_STREAM,
     SETTINGS, SETTINGS_INITIAL_WINDOW_SIZE, SETTINGS_MAX_FRAME_SIZE, WINDOW_UPDATE, CachingDecoder,
-    Http2Error, _NAMES, _ReadBuffer, _strip_padding, frame, hpack_int, hpack_literal, take_frames,
+    FRAME_NAMES, Http2Error, ReadBuffer, frame, hpack_int, hpack_literal, strip_padding, take_frames,
 )
 from protos.pacing import PacedWait, wait_paced
 
@@ -68,7 +68,7 @@ class Http2Channel:
         self.sock: socket.socket | None = None
         self._decoder = CachingDecoder()
         self._buffer = bytearray()
-        self._reader = _ReadBuffer()
+        self._reader = ReadBuffer()
         self._next_stream = 1
         self._send_window = DEFAULT_WINDOW
         self._peer_initial_window = DEFAULT_WINDOW
@@ -163,10 +163,10 @@ class Http2Channel:
         ended, out = False, bytearray()
         for kind, flags, sid, payload in take_frames(self._buffer):
             if len(payload) < _MIN_LENGTH.get(kind, 0):
-                raise Http2Error(f"{_NAMES[kind]} frame of {len(payload)} bytes", FRAME_SIZE_ERROR)
+                raise Http2Error(f"{FRAME_NAMES[kind]} frame of {len(payload)} bytes", FRAME_SIZE_ERROR)
             if kind == DATA:
                 self._recv_unacked += len(payload)  # flow control counts padding too
-                payload = _strip_padding(flags, payload)
+                payload = strip_padding(flags, payload)
                 if self._recv_unacked > MAX_WINDOW // 2:
                     out += frame(WINDOW_UPDATE, 0, 0, struct.pack(">I", self._recv_unacked))
                     self._recv_unacked = 0
@@ -175,7 +175,7 @@ class Http2Channel:
                     ended |= bool(flags & END_STREAM)
             elif kind in (HEADERS, CONTINUATION):
                 if kind == HEADERS:
-                    payload = _strip_padding(flags, payload)
+                    payload = strip_padding(flags, payload)
                     if flags & PRIORITY_FLAG:
                         payload = payload[5:]
                     self._header_parts = [payload]

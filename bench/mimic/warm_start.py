@@ -38,8 +38,8 @@ from protos.types import BehaviorSpec
 from trainer.artifacts.checkpoints import save_checkpoint
 from trainer.artifacts.onnx_export import export_policy
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.networks import Actor
-from trainer.ppo.policy import CONTINUOUS_CLIP, Policy
+from trainer.common.networks import Actor
+from trainer.common.policy import CONTINUOUS_CLIP, Policy
 from unity_stub_env.tasks.base import EnvironmentParameters
 from unity_stub_env.tasks.mimic import MimicTask
 
@@ -64,7 +64,7 @@ def collect(motion: int, sigma: float, decisions: int, seed: int, actor: Actor |
         o, a = task.observe()[0], reference_actions(task)
         obs.append(o)
         act.append(a)
-        if actor is not None:  # the environment receives clamp(mu, -3, 3) / 3 (trainer/ppo/policy.py)
+        if actor is not None:  # the environment receives clamp(mu, -3, 3) / 3 (trainer/common/policy.py)
             with torch.no_grad():
                 mu = actor.heads([torch.as_tensor(o)], None)[0].numpy().astype(np.float64)
             a = mu.clip(-CONTINUOUS_CLIP, CONTINUOUS_CLIP) / CONTINUOUS_CLIP

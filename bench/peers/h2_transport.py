@@ -1,7 +1,7 @@
 """The trainer's gRPC server on python-hyper's ``h2`` state machine: measured, not used.
 
-``bench/transport.py`` compares it with the hand-written framing of ``protos/http2.py``
-(and with grpcio). Same interface and threading as ``http2.Http2Transport``, which it extends
+``bench/transport.py`` compares it with the hand-written server of ``trainer/protocol/http2_server.py``
+(and with grpcio). Same interface and threading as ``http2_server.Http2Transport``, which it extends
 (listener, ``take`` with pacing, ``poll``, ``close``); only each connection's frame handling is
 ``h2``'s: it parses and validates every frame (RFC 9113), keeps both flow-control windows and
 the HPACK tables, and reports requests as events. The hand-written server was kept because this
@@ -29,10 +29,10 @@ from protos.http2 import (
     GRPC_UNIMPLEMENTED,
     MAX_WINDOW,
     OUR_MAX_FRAME,
-    IncomingCall,
-    _peer_name,
-    _ReadBuffer,
+    ReadBuffer,
 )
+from trainer.protocol import http2_server
+from trainer.protocol.http2_server import IncomingCall, _peer_name
 
 logger = logging.getLogger(__name__)
 
@@ -63,7 +63,7 @@ class H2Connection:
         self.sock = sock
         self.transport = transport
         self.peer = _peer_name(sock)
-        self._reader = _ReadBuffer()
+        self._reader = ReadBuffer()
         self._buffer = bytearray()
         self.streams: dict[int, _Stream] = {}
         self.pending: dict[int, IncomingCall] = {}
@@ -306,7 +306,7 @@ def _percent(message: str) -> bytes:
     return quote(message, safe=" !\"#$&'()*+,-./:;<=>?@[\\]^_`{|}~").encode()
 
 
-class H2Transport(http2.Http2Transport):
+class H2Transport(http2_server.Http2Transport):
     """``Http2Transport`` whose connections are ``h2`` state machines."""
 
     def _accept(self) -> None:

@@ -1,21 +1,23 @@
-"""Runs INSIDE .venv-interop (the real mlagents_envs 1.1.0); never imports project code.
-
-Times ``UnityEnvironment`` stepping an executable with random actions, the way a user's Python
+"""Times ``UnityEnvironment`` stepping an executable with random actions, the way a user's Python
 loop would: get_steps, random_action for the deciding agents, set_actions, step.
 
+Runs under the package named by ``"package"``: the real ``mlagents_envs`` 1.1.0 (the default; in
+.venv-interop, with no project code on its path) or ``mlagents_like_envs`` (the project's venv),
+imported by the same module path, so both are timed with the very same loop.
+
 Usage: python mlagents_envs_rollout.py '{"file_name": ..., "base_port": ..., "num_areas": 16,
-        "warmup": 200, "exchanges": 2000}'
+        "warmup": 200, "exchanges": 2000, "package": "mlagents_envs"}'
 Prints one JSON line: {"exchanges", "seconds", "agent_steps"}.
 """
+import importlib
 import json
 import sys
 import time
 
-from mlagents_envs.environment import UnityEnvironment
-
 
 def main():
     options = json.loads(sys.argv[1])
+    UnityEnvironment = importlib.import_module(options.get("package", "mlagents_envs") + ".environment").UnityEnvironment
     env = UnityEnvironment(file_name=options["file_name"], base_port=options["base_port"],
                            no_graphics=True, seed=1, timeout_wait=60,
                            num_areas=options.get("num_areas", 1))

@@ -11,7 +11,7 @@ import pytest
 
 from unity_stub_env import TASKS
 
-# The documented specs (README "Stub tasks" / docs/protocol.md §3.2), written out by hand.
+# The documented specs (README "Stub tasks" / docs/protocol.md, "Behavior spec"), written out by hand.
 # dimension_property 1 = NONE; observation_type 0 = DEFAULT.
 DOCUMENTED_SPECS = {
     "basic": {"Basic?team=0": {

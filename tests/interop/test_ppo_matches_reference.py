@@ -19,7 +19,7 @@ import torch
 from protos.types import (
     ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType,
 )
-from trainer.ppo.buffer import Trajectory
+from trainer.common.trajectory import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer, normalize_advantages
 

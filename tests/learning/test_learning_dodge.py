@@ -1,5 +1,5 @@
-"""Learning smoke test for ``dodge`` (seed 000): our trainer, the stub as a separate process over
-real gRPC, 14 agents, a fixed seed and a bounded number of steps.
+"""Learning smoke test for ``dodge`` (the dodge thesis, docs/stub-tasks.md): our trainer, the stub
+as a separate process over real gRPC, 14 agents, a fixed seed and a bounded number of steps.
 
 The thesis' configuration (3 x 512, 5 M steps) is a bench run (bench/README.md); this test uses a
 small network with a higher learning rate so that a short run shows learning. What it can learn

@@ -1,5 +1,6 @@
-"""Learning smoke test for ``mimic`` (seed 001): our trainer, the stub as a separate process over
-real gRPC, 16 ragdolls (2 areas), a fixed seed and a bounded number of steps.
+"""Learning smoke test for ``mimic`` (the mimic thesis, docs/stub-tasks.md): our trainer, the stub
+as a separate process over real gRPC, 16 ragdolls (2 areas), a fixed seed and a bounded number of
+steps.
 
 The thesis' configuration (2 x 1024, up to 5e7 steps) is a bench run (bench/README.md); this test
 uses a small network with a higher learning rate on the standing motion with the default absolute

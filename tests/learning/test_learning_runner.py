@@ -1,4 +1,4 @@
-"""The runner (seed 004) through mlagents-like-learn and the stub as a separate process: an hmm
+"""The runner (docs/stub-tasks.md) through mlagents-like-learn and the stub as a separate process: an hmm
 sampler's tracks reach the simulator, and PPO learns to drive HMM-generated tracks."""
 from __future__ import annotations
 
@@ -37,8 +37,8 @@ def test_runner_learns_to_drive_generated_tracks(tmp_path, env_no_proxy):
     """configs/runner.yaml cut to 60,000 steps with learning rate 1e-3 and a 2048 buffer, 4 areas
     (16 agents), seed 1. Random driving falls off within a few platforms (mean return about
     -0.85 at the first summary); the threshold: the last summary's mean return beats the first
-    by at least 0.15 (measured on a loaded machine: -0.845 -> -0.517). The full 200k-step run finishes every one of 100
-    held-out tracks (bench/RESULTS.md)."""
+    by at least 0.15 (the measured run: bench/RESULTS.md, "Learning-test thresholds"). The full
+    200k-step run finishes every one of 100 held-out tracks (bench/RESULTS.md)."""
     text = (ROOT / "configs" / "runner.yaml").read_text()
     for old, new in (("max_steps: 200000", "max_steps: 60000"), ("learning_rate: 3.0e-4", "learning_rate: 1.0e-3"),
                      ("buffer_size: 4096", "buffer_size: 2048"), ("batch_size: 256", "batch_size: 128"),

@@ -52,7 +52,7 @@ def observation_value(obs: observation_pb2.ObservationProto) -> np.ndarray:
 
 def mask_fault(infos: Sequence, branches: Sequence[int]) -> bool:
     """True if a deciding agent's action mask is refused: neither empty nor one entry per
-    option, or masking every option of a branch (docs/protocol.md §3.1)."""
+    option, or masking every option of a branch (docs/protocol.md, "Simulator → trainer")."""
     total = sum(branches)
     bounds = np.cumsum([0, *branches])
     for info in infos if total else ():  # without discrete actions masks are not read

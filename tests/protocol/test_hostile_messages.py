@@ -5,7 +5,7 @@
   (forced with ``records.MIN_ROWS`` = 1) and the protobuf path (``MIN_ROWS`` out of reach) give
   equal steps or both raise ProtocolError; no other exception escapes either;
 * hostile specs -> one ProtocolError before anything is allocated for them (the limits of
-  docs/protocol.md §3.2), checked under an address-space limit in a subprocess;
+  docs/protocol.md, "Behavior spec"), checked under an address-space limit in a subprocess;
 * the side-channel parser (``SideChannelRouter.dispatch``): random bytes and mutated valid
   messages -> decoded values or ProtocolError, nothing else; valid ones round-trip.
 """

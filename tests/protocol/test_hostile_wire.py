@@ -1,4 +1,4 @@
-"""Hostile clients against the trainer's HTTP/2 server (protos/http2.py), beyond single-frame
+"""Hostile clients against the trainer's HTTP/2 server (trainer/protocol/http2_server.py), beyond single-frame
 RFC cases (those are in test_http2_conformance.py): a second client on a port held by a live
 session, floods of idle connections, slow-loris, many half-sent requests, and a property test
 throwing random and mutated frame sequences at a live transport while a well-behaved client
@@ -24,6 +24,7 @@ from protos.http2 import (
     CONTINUATION, DATA, END_HEADERS, END_STREAM, GOAWAY, HEADERS, PING, SETTINGS, WINDOW_UPDATE, frame,
 )
 from tests.protocol.conftest import BIG, ScriptedUnity, agent_info, brain_params, free_port, m1, m2, rl_message
+from trainer.protocol import http2_server
 from trainer.protocol.server import EXCHANGE_PATH, UnityEndpoint
 from unity_stub_env.http2_client import CallError, Http2Channel, request_headers
 
@@ -40,7 +41,7 @@ def request(stream_id: int, body: bytes = HELLO) -> bytes:
 
 @pytest.fixture
 def transport():
-    t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+    t = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
     t.start()
     yield t
     t.close(grace=0.1)
@@ -96,7 +97,7 @@ def test_a_second_client_cannot_inject_calls_into_a_live_session(transport, capl
     assert good.call(b"m1") == b"ok"  # the session: the connection whose call the trainer took
     intruder = socket.create_connection(("127.0.0.1", transport.port), timeout=5)
     intruder.sendall(PREAMBLE + request(1, b"\x00" + struct.pack(">I", 6) + b"inject"))
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         for _ in range(5):
             assert transport.take(0.02) is None  # nothing reaches the trainer
     frames = read_until_closed(intruder)
@@ -108,7 +109,7 @@ def test_a_second_client_cannot_inject_calls_into_a_live_session(transport, capl
     message = fields[b"grpc-message"].decode()
     assert f"port {transport.port} is held by a live training session with 127.0.0.1:" in message
     assert [struct.unpack_from(">II", p) for kind, _, _, p in frames if kind == GOAWAY] == [(1, 0)]
-    (line,) = [r.getMessage() for r in caplog.records if r.name == "protos.http2"]
+    (line,) = [r.getMessage() for r in caplog.records if r.name == "trainer.protocol.http2_server"]
     assert line.startswith("Closing the connection from 127.0.0.1:") and "held by a live training session" in line
     assert not transport.client_gone
     assert good.call(b"m2", b"still served") == b"still served"
@@ -227,7 +228,7 @@ def test_closed_transports_hold_no_read_buffer_even_when_something_still_refers_
     try:
         before = tracemalloc.get_traced_memory()[0]
         for _ in range(10):
-            t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+            t = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
             t.start()
             good = GoodClient(t)
             assert good.call(b"m1") == b"ok"  # a session, as a simulator's
@@ -248,13 +249,13 @@ def test_idle_connections_are_capped_and_hold_no_read_buffer_each(transport, cap
     tracemalloc.start()
     before = tracemalloc.get_traced_memory()[0]
     idle = []
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
-        for _ in range(3 * http2.MAX_CONNECTIONS):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
+        for _ in range(3 * http2_server.MAX_CONNECTIONS):
             idle.append(socket.create_connection(("127.0.0.1", transport.port), timeout=5))
             idle[-1].sendall(PREAMBLE)
             transport.poll()
             transport.poll()
-            assert len(transport._connections) <= http2.MAX_CONNECTIONS
+            assert len(transport._connections) <= http2_server.MAX_CONNECTIONS
     held = tracemalloc.get_traced_memory()[0] - before
     tracemalloc.stop()
     assert held < 256 * 1024, held  # (each connection used to keep a 1 MiB receive buffer)
@@ -269,13 +270,13 @@ def test_idle_connections_are_capped_and_hold_no_read_buffer_each(transport, cap
 @pytest.mark.parametrize("what, setting", [("preface", "PREFACE_TIMEOUT_S"), ("idle", "IDLE_TIMEOUT_S")])
 def test_slow_loris_and_idle_connections_are_closed_but_never_the_session(transport, monkeypatch, caplog, what,
                                                                             setting):
-    monkeypatch.setattr(http2, setting, 0.3)
+    monkeypatch.setattr(http2_server, setting, 0.3)
     good = GoodClient(transport)
     assert good.call(b"m1") == b"ok"
     slow = socket.create_connection(("127.0.0.1", transport.port), timeout=5)
     # slow-loris: the preface a byte at a time; idle: a whole preface, then nothing
     slow.sendall(http2.PREFACE[:3] if what == "preface" else PREAMBLE)
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         for _ in range(100):
             transport.poll()
             if len(transport._connections) == 1:
@@ -299,7 +300,7 @@ def test_many_half_sent_requests_together_cannot_buffer_more_than_one_message(tr
     data = b"".join(frame(HEADERS, END_HEADERS, sid, HEADER_BLOCK) + frame(DATA, 0, sid, b"\0" * 900)
                     for sid in range(1, 32, 2))  # 16 streams, each under the 1000-byte limit
     sock.sendall(data)
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         for _ in range(5):
             transport.poll()
     (connection,) = transport._connections.values()
@@ -359,18 +360,18 @@ def hostile_bytes(draw):
 
 
 def _bounded(transport) -> None:
-    assert len(transport._connections) <= http2.MAX_CONNECTIONS
+    assert len(transport._connections) <= http2_server.MAX_CONNECTIONS
     for connection in transport._connections.values():
-        assert len(connection.buffer) <= http2.OUR_MAX_FRAME + 9 + http2._RECV_BYTES
-        assert len(connection.out) <= http2.MAX_UNSENT
-        assert len(connection.streams) <= http2.MAX_STREAMS
+        assert len(connection.buffer) <= http2.OUR_MAX_FRAME + 9 + http2.RECV_BYTES
+        assert len(connection.out) <= http2_server.MAX_UNSENT
+        assert len(connection.streams) <= http2_server.MAX_STREAMS
         assert sum(len(s.body) for s in connection.streams.values()) <= transport.max_message_bytes + 5
 
 
 @pytest.fixture(scope="module")
 def shared():
     """One live transport for every example, its session held by a well-behaved client."""
-    t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+    t = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
     t.start()
     good = GoodClient(t)
     assert good.call(b"first") == b"ok"
@@ -415,7 +416,7 @@ def test_random_and_mutated_frames_as_the_first_client_end_in_a_call_or_a_closed
     or its connection closed, nothing escapes; once it leaves, a simulator connecting next is
     served unless the hostile one had left a call unanswered (then the trainer is told:
     ``client_gone``, and a real run restarts that simulator)."""
-    transport = http2.Http2Transport("127.0.0.1", 0, EXCHANGE_PATH, max_message_bytes=1000)
+    transport = http2_server.Http2Transport("127.0.0.1", 0, EXCHANGE_PATH, max_message_bytes=1000)
     transport.start()
     try:
         sock = socket.create_connection(("127.0.0.1", transport.port), timeout=5)
@@ -441,7 +442,7 @@ def test_random_and_mutated_frames_as_the_first_client_end_in_a_call_or_a_closed
 
 @pytest.mark.timeout(20)  # refusing it used to wait up to 30 s in sendall for the intruder to read
 def test_refusing_an_intruder_that_does_not_read_never_blocks_the_trainer(transport, monkeypatch):
-    monkeypatch.setattr(http2, "MAX_UNSENT", 64 << 20)  # keep it connected while its buffers fill
+    monkeypatch.setattr(http2_server, "MAX_UNSENT", 64 << 20)  # keep it connected while its buffers fill
     good = GoodClient(transport)
     assert good.call(b"m1") == b"ok"
     intruder = socket.socket()

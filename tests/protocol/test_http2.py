@@ -13,6 +13,7 @@ from protos import http2
 from protos.communicator_objects import unity_message_pb2
 from protos.errors import ProtocolError
 from tests.protocol.conftest import free_port, m1, m2
+from trainer.protocol import http2_server
 from trainer.protocol.server import EXCHANGE_PATH, UnityEndpoint
 
 pytestmark = pytest.mark.timeout(60)
@@ -39,18 +40,18 @@ def test_literal_header_and_frame_layout():
     assert http2.hpack_literal(b"grpc-status", b"0") == b"\x00\x0bgrpc-status\x010"
     # 9-byte header: 24-bit length, type, flags, 31-bit stream id
     assert http2.frame(http2.DATA, http2.END_STREAM, 3, b"abc") == b"\x00\x00\x03\x00\x01\x00\x00\x00\x03abc"
-    assert http2.RESPONSE_HEADERS == b"\x88\x0f\x10\x10application/grpc"
+    assert http2_server.RESPONSE_HEADERS == b"\x88\x0f\x10\x10application/grpc"
 
 
 def test_grpc_message_is_percent_encoded():
-    block = http2.trailers(12, "unknown method /x.Y/Z; 100%")
+    block = http2_server.trailers(12, "unknown method /x.Y/Z; 100%")
     assert block.endswith(b"unknown method /x.Y/Z; 100%25")
 
 
 def test_our_header_blocks_decode_with_an_independent_hpack_decoder():
     import hpack
 
-    decoded = hpack.Decoder().decode(http2.TABLE_SIZE_ZERO + http2.RESPONSE_HEADERS + http2.trailers(13, "bad"), raw=True)
+    decoded = hpack.Decoder().decode(http2_server.TABLE_SIZE_ZERO + http2_server.RESPONSE_HEADERS + http2_server.trailers(13, "bad"), raw=True)
     assert decoded == [(b":status", b"200"), (b"content-type", b"application/grpc"),
                        (b"grpc-status", b"13"), (b"grpc-message", b"bad")]
 
@@ -58,7 +59,7 @@ def test_our_header_blocks_decode_with_an_independent_hpack_decoder():
 # --------------------------------------------------------------------------- with real clients
 @pytest.fixture
 def transport():
-    t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1 << 20)
+    t = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1 << 20)
     t.start()
     yield t
     t.close(grace=0.5)
@@ -137,7 +138,7 @@ def test_a_client_that_is_not_http2_is_disconnected_with_a_reason(transport, cap
 
 def test_pings_are_acknowledged_and_settings_acked():
     """Raw HTTP/2 bytes: preface, SETTINGS, PING → SETTINGS ACK and PING ACK with the same data."""
-    transport = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, 1 << 20)
+    transport = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, 1 << 20)
     transport.start()
     try:
         with socket.create_connection(("127.0.0.1", transport.port), timeout=5) as sock:
@@ -224,7 +225,7 @@ def test_caching_decoder_reuses_only_blocks_that_leave_the_table_unchanged():
 
 
 def test_endless_header_blocks_close_the_connection_instead_of_growing():
-    transport = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, 1 << 20)
+    transport = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, 1 << 20)
     transport.start()
     try:
         with socket.create_connection(("127.0.0.1", transport.port), timeout=5) as sock:

@@ -19,6 +19,7 @@ import hpack
 import pytest
 
 from tests.protocol.conftest import free_port
+from trainer.protocol import http2_server
 from trainer.errors import UnityTimeOutError
 from protos import http2
 from protos.http2 import (
@@ -55,7 +56,7 @@ def setting(key: int, value: int) -> bytes:
 
 @pytest.fixture
 def transport():
-    t = http2.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
+    t = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, max_message_bytes=1000)
     t.start()
     yield t
     t.close(grace=0.1)
@@ -182,10 +183,10 @@ CONNECTION_ERRORS = [
 @pytest.mark.parametrize(("data", "code", "reason"), [case[1:] for case in CONNECTION_ERRORS],
                          ids=[case[0] for case in CONNECTION_ERRORS])
 def test_connection_errors_answer_goaway_with_the_rfc_code(transport, caplog, data, code, reason):
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         _, got_code, got_reason = goaway(transport, data)
     assert (got_code, reason in got_reason) == (code, True), got_reason
-    (record,) = [r for r in caplog.records if r.name == "protos.http2"]
+    (record,) = [r for r in caplog.records if r.name == "trainer.protocol.http2_server"]
     assert record.getMessage().startswith("Closing the connection from 127.0.0.1:") and reason in record.getMessage()
     assert record.exc_info is None
     assert transport.take(0.0) is None and not transport.closed  # still listening for the next client
@@ -214,7 +215,7 @@ def test_data_beyond_the_connection_window_we_granted_is_a_flow_control_error(tr
     client.send(headers(1)).pump()
     (connection,) = transport._connections.values()
     connection.recv_window = 10
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         client.send(frame(DATA, 0, 1, b"x" * 11)).pump()
     frames = client.frames(until_closed=True)
     (payload,) = [p for kind, _, _, p in frames if kind == GOAWAY]
@@ -252,12 +253,12 @@ STREAM_ERRORS = [
 def test_stream_errors_answer_rst_stream_and_the_connection_keeps_serving(transport, caplog, data, stream_id, code,
                                                                           then):
     client = Client(transport)
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         client.send(data).pump()
     resets = [(sid, struct.unpack(">I", p)[0]) for kind, _, sid, p in client.frames(until_closed=False)
               if kind == RST_STREAM]
     assert resets == [(stream_id, code)]
-    (record,) = [r for r in caplog.records if r.name == "protos.http2" and "Reset" in r.getMessage()]
+    (record,) = [r for r in caplog.records if r.name == "trainer.protocol.http2_server" and "Reset" in r.getMessage()]
     assert record.getMessage().startswith(f"Reset stream {stream_id} from 127.0.0.1:")
     assert transport._connections  # still open
     if then is None:
@@ -307,7 +308,7 @@ GRPC_ERRORS = [
                          ids=[case[0] for case in GRPC_ERRORS])
 def test_bad_grpc_messages_get_a_grpc_status_and_never_reach_the_trainer(transport, caplog, body, status, reason):
     client = Client(transport)
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         calls = client.send(request(1, body)).pump()
     assert calls == []
     fields = _answer(client)
@@ -323,7 +324,7 @@ def test_late_window_update_rst_stream_and_priority_on_a_closed_stream_are_ignor
     (call,) = client.send(request(1)).pump()
     call.answer(b"first")
     client.frames(until_closed=False)
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         client.send(window_update(1, 100) + frame(PRIORITY, 0, 1, b"\0" * 5) + CANCEL_1 + request(3)).pump()
     assert [c.stream_id for c in client.calls] == [1, 3] and not transport.client_gone
     assert caplog.records == []
@@ -362,7 +363,7 @@ def test_a_client_flooding_pings_without_reading_is_disconnected(transport, capl
     sock.settimeout(5)
     sock.sendall(PREAMBLE)
     pings = frame(PING, 0, 0, b"\0" * 8) * 2000
-    with caplog.at_level(logging.WARNING, logger="protos.http2"):
+    with caplog.at_level(logging.WARNING, logger="trainer.protocol.http2_server"):
         for _ in range(3000):  # up to 100 MB of replies
             if not transport._connections and _ > 0:
                 break

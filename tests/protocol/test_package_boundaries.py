@@ -3,7 +3,12 @@
 * ``protos`` (the wire contract) imports neither ``trainer`` nor ``unity_stub_env``;
 * ``unity_stub_env`` imports ``protos``, itself and third-party libraries, never ``trainer``;
 * ``trainer`` uses only the stub's public API: names in ``unity_stub_env.__all__``, imported from
-  the package itself (``from unity_stub_env import TASK_NAMES``), never a stub module.
+  the package itself (``from unity_stub_env import TASK_NAMES``), never a stub module;
+* ``mlagents_like_envs`` (the mlagents_envs-compatible API) drives environments through the
+  trainer's launcher, server and codec, so it may import the few ``trainer`` modules in
+  ``ENVS_API_USES`` and the stub's public API, nothing else of either; ``protos`` and ``trainer``
+  never import it, and the stub only its light modules (``ENVS_API_LIGHT``: the data types and
+  exceptions, which themselves import nothing of the project but ``protos``).
 
 So a bug in a shared encoder cannot hide behind one side's private copy, and either package can
 change its internals without breaking the other.
@@ -54,9 +59,17 @@ def test_the_scan_sees_imports_inside_functions_and_from_imports(tmp_path, monke
         (1, "os", ()), (3, "trainer.errors", ("ConfigError",))]
 
 
+# the trainer modules behind mlagents_like_envs.environment: launcher, server (with its codec),
+# their errors, and the one reader of MLAGENTS_LIKE_* variables
+ENVS_API_USES = {"trainer.envs.launcher", "trainer.envs.cpus", "trainer.protocol.server", "trainer.errors",
+                 "trainer.config.env_vars"}
+ENVS_API_LIGHT = {"mlagents_like_envs", "mlagents_like_envs.base_env", "mlagents_like_envs.exception"}
+
+
 @pytest.mark.parametrize("package, forbidden", [
-    ("protos", {"trainer", "unity_stub_env"}),
+    ("protos", {"trainer", "unity_stub_env", "mlagents_like_envs"}),
     ("unity_stub_env", {"trainer"}),
+    ("trainer", {"mlagents_like_envs"}),
 ])
 def test_package_imports_none_of(package, forbidden):
     bad = [f"{where}:{line} imports {module}" for where, line, module, _ in imports(package)
@@ -75,6 +88,26 @@ def test_trainer_uses_only_the_stubs_public_api():
     assert bad == []
 
 
+def test_the_envs_api_uses_only_the_trainers_transport_and_the_stubs_public_api():
+    public = set(unity_stub_env.__all__)
+    bad = []
+    for where, line, module, names in imports("mlagents_like_envs"):
+        if top(module) == "trainer" and module not in ENVS_API_USES:
+            bad.append(f"{where}:{line} imports {module}")
+        if top(module) == "unity_stub_env" and (module != "unity_stub_env" or not set(names) <= public):
+            bad.append(f"{where}:{line} imports {module} {names}")
+    assert bad == []
+
+
+def test_the_stub_imports_only_the_envs_apis_light_modules():
+    light_files = {m.replace(".", "/") + suffix for m in ENVS_API_LIGHT for suffix in (".py", "/__init__.py")}
+    bad = [f"{where}:{line} imports {module}" for where, line, module, _ in imports("unity_stub_env")
+           if top(module) == "mlagents_like_envs" and module not in ENVS_API_LIGHT]
+    bad += [f"{where}:{line} imports {module}" for where, line, module, _ in imports("mlagents_like_envs")
+            if where in light_files and top(module) in {"trainer", "unity_stub_env", "mlagents_like_envs"}]
+    assert bad == []
+
+
 def test_the_stubs_public_api_is_there():
     for name in unity_stub_env.__all__:
         assert getattr(unity_stub_env, name) is not None
@@ -85,3 +118,12 @@ def test_the_stubs_public_api_is_there():
 def test_the_status_200_header_is_protobufs():
     header = header_pb2.HeaderProto(status=200).SerializeToString()
     assert wire.HEADER_OK_FIELD == b"\x0a" + bytes([len(header)]) + header == b"\x0a\x03\x08\xc8\x01"
+
+
+def test_the_stub_imports_only_public_names_of_protos():
+    """What the stub shares with the trainer (the HTTP/2 framing, the codec pieces) is public in
+    ``protos``: a private name imported across the boundary would be a contract nobody sees."""
+    bad = [f"{where}:{line} imports {module} {[n for n in names if n.startswith('_')]}"
+           for where, line, module, names in imports("unity_stub_env")
+           if top(module) == "protos" and any(n.startswith("_") for n in names)]
+    assert bad == []

@@ -1,4 +1,5 @@
-"""The wire contract: generated code is current, descriptors match docs/protocol.md §2 and the real ML-Agents."""
+"""The wire contract: generated code is current, descriptors match docs/protocol.md ("Message schema") and the real
+ML-Agents."""
 from __future__ import annotations
 
 import json

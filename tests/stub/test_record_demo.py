@@ -59,7 +59,7 @@ def test_an_onnx_policy_records_its_deterministic_actions(tmp_path):
 
     from trainer.artifacts.onnx_export import export_policy
     from trainer.ppo.hyperparams import PPOHyperparams
-    from trainer.ppo.policy import Policy
+    from trainer.common.policy import Policy
     from unity_stub_env.tasks import make_task
 
     task = make_task("basic")

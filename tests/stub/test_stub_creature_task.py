@@ -1,4 +1,4 @@
-"""The ``creature`` task (seed 002): specs, Walker's reward terms, targets, terrain, episode ends."""
+"""The ``creature`` task (docs/stub-tasks.md): specs, Walker's reward terms, targets, terrain, episode ends."""
 from __future__ import annotations
 
 import numpy as np

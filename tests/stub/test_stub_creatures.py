@@ -1,4 +1,5 @@
-"""Creature generators (seed 002): reproducible MJCF, models that load and rest, symmetry, limits."""
+"""Creature generators (the creature report, docs/stub-tasks.md): reproducible MJCF, models that
+load and rest, symmetry, limits."""
 from __future__ import annotations
 
 import subprocess

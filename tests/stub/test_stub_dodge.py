@@ -1,4 +1,5 @@
-"""The ``dodge`` task (seed 000): model, pose, rewards and outcomes against hand-computed numbers."""
+"""The ``dodge`` task (the dodge thesis, docs/stub-tasks.md): model, pose, rewards and outcomes
+against hand-computed numbers."""
 from __future__ import annotations
 
 import math

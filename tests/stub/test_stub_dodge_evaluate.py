@@ -8,7 +8,7 @@ import pytest
 
 from trainer.artifacts.onnx_export import export_policy
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.policy import Policy
+from trainer.common.policy import Policy
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from unity_stub_env.cli import main
 from unity_stub_env.tasks.dodge import SCRIPTED_THROWS, random_throws, run_throws, summarize

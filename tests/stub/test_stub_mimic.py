@@ -1,5 +1,5 @@
-"""The ``mimic`` task (seed 001): model, reference motions, reward terms, RSI, early termination,
-pushes and the action mapping, against hand-computed numbers."""
+"""The ``mimic`` task (the mimic thesis, docs/stub-tasks.md): model, reference motions, reward
+terms, RSI, early termination, pushes and the action mapping, against hand-computed numbers."""
 from __future__ import annotations
 
 import math

@@ -9,7 +9,7 @@ import pytest
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.artifacts.onnx_export import export_policy
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.policy import Policy
+from trainer.common.policy import Policy
 from unity_stub_env.cli import main
 from unity_stub_env.tasks.mimic import MOTIONS, PUSH_LADDER, run_trials
 

@@ -1,5 +1,6 @@
-"""The runner task (seed 004): specs, the track generator, the kinematics by hand, the shipped
-models, and the hmm sampler's sequences arriving through the side-channel encoding."""
+"""The runner task (the runner thesis, docs/stub-tasks.md): specs, the track generator, the
+kinematics by hand, the shipped models, and the hmm sampler's sequences arriving through the
+side-channel encoding."""
 from __future__ import annotations
 
 import math
@@ -10,7 +11,7 @@ import pytest
 from protos import side_channels as sc
 from trainer.config.env_params import hmm_model, hmm_sequences, structure_environment_parameters
 from trainer.curriculum import EnvironmentParameterManager
-from trainer.run import environment_parameter_messages
+from trainer.side_channel_payloads import environment_parameter_messages
 from unity_stub_env.communicator import SideChannelState
 from unity_stub_env.tasks import EnvironmentParameters, make_task
 from unity_stub_env.tasks import runner as R

@@ -1,6 +1,6 @@
 """The runner driven by the REAL mlagents_envs 1.1.0 (its own venv and process) in Editor mode,
 with its track set through ML-Agents' own EnvironmentParametersChannel: the plain float keys
-``track.count``, ``track.length``, ``track.i`` that the ``hmm`` sampler sends (docs/protocol.md §4.4)."""
+``track.count``, ``track.length``, ``track.i`` that the ``hmm`` sampler sends (docs/protocol.md, "Label sequences")."""
 from __future__ import annotations
 
 import os

@@ -8,7 +8,7 @@ import pytest
 from trainer.config import build_parser, parse_run_options
 from trainer.errors import ConfigError
 
-SPEC_DEFAULTS = {  # docs/configuration.md §5, dest -> default
+SPEC_DEFAULTS = {  # docs/configuration.md, "Command line", dest -> default
     "env_path": None, "resume": False, "load_model": False, "train_model": False, "deterministic": False,
     "force": False, "run_id": "ppo", "initialize_from": None, "seed": -1, "inference": False,
     "base_port": 5005, "num_envs": 1, "num_areas": 1, "debug": False, "env_args": None,

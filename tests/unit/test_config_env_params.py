@@ -1,4 +1,5 @@
-"""Samplers, seed offsets (docs/protocol.md §4.3) and lesson advancement (docs/configuration.md §6.7) with hand-computed numbers."""
+"""Samplers, seed offsets (docs/protocol.md, "Sampler seeds") and lesson advancement (docs/configuration.md,
+"environment_parameters") with hand-computed numbers."""
 from __future__ import annotations
 
 import logging

@@ -232,7 +232,7 @@ def test_run_options_from_dict_without_file_has_no_config_path():
 
 
 def test_dodge_configs_carry_the_thesis_values_and_agree(caplog):
-    """configs/dodge.yaml and the 0.x flat configs/dodge_legacy.yaml: seed 000's hyperparameters
+    """configs/dodge.yaml and the 0.x flat configs/dodge_legacy.yaml: the dodge thesis' hyperparameters
     (gamma 0.995, lambd 0.93, batch 2048, buffer 20480, 5 epochs, horizon 1000, beta 1e-2,
     epsilon 0.3, normalize, 3 x 512, 5e6 steps); the legacy one loads with its warning."""
     modern = load_run_options(os.path.join(REPO, "configs", "dodge.yaml")).behaviors["Dodge"]
@@ -250,7 +250,7 @@ def test_dodge_configs_carry_the_thesis_values_and_agree(caplog):
 
 
 def test_mimic_config_carries_the_thesis_values():
-    """configs/mimic.yaml: seed 001's final hyperparameters (batch 1000, buffer 20000, lr 1e-4 linear,
+    """configs/mimic.yaml: the mimic thesis' final hyperparameters (batch 1000, buffer 20000, lr 1e-4 linear,
     beta 5e-4, epsilon 0.2, lambd 0.95, 2 epochs, normalize, 2 x 1024, gamma 0.99, horizon 1250,
     5e7 steps, checkpoints every 200k, summaries every 25k) and the motion parameter (0, stand)."""
     options = load_run_options(os.path.join(REPO, "configs", "mimic.yaml"))

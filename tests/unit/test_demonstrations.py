@@ -1,5 +1,5 @@
 """Demonstrations in the trainer: the loader's pairing (trainer/demonstrations.py), behavioral
-cloning (trainer/behavioral_cloning.py) and GAIL (trainer/ppo/reward_providers.py), against
+cloning (trainer/behavioral_cloning.py) and GAIL (trainer/common/reward_providers.py), against
 hand-computed values and, for GAIL, recorded ball3d demonstrations."""
 from __future__ import annotations
 
@@ -22,13 +22,13 @@ from trainer.config.settings import BehavioralCloningSettings
 from trainer.demonstrations import DemoExperiences, check_demo_paths, load_demonstrations
 from trainer.errors import ConfigError
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
-from trainer.ppo.policy import Policy
-from trainer.ppo.reward_providers import Experience, GAILProvider
+from trainer.common.policy import Policy
+from trainer.common.reward_providers import Experience, GAILProvider
 from trainer.ppo.trainer import PPOTrainer
 
 @pytest.fixture(autouse=True)
 def one_torch_thread():
-    """One intra-op thread, as the trainer runs (trainer/run.py): two threads on a loaded 2-CPU
+    """One intra-op thread, as the trainer runs (trainer/run_setup.py): two threads on a loaded 2-CPU
     machine made these small networks 10x slower."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -268,7 +268,7 @@ def test_resume_keeps_the_gail_discriminator_and_bc_state(tmp_path):
         return trainer
 
     def train(trainer):
-        from trainer.ppo.buffer import Trajectory
+        from trainer.common.trajectory import Trajectory
 
         out = trainer.policy.act(demo.obs)
         trainer.process_trajectory(Trajectory(
@@ -292,7 +292,7 @@ def test_resume_keeps_the_gail_discriminator_and_bc_state(tmp_path):
 
 
 def test_sac_runs_behavioral_cloning_after_every_gradient_step_and_keeps_it_in_checkpoints():
-    from trainer.ppo.buffer import Trajectory
+    from trainer.common.trajectory import Trajectory
     from trainer.sac.hyperparams import SACHyperparams
     from trainer.sac.trainer import SACTrainer
 
@@ -348,7 +348,7 @@ def test_gail_trains_beside_a_recurrent_policy():
     trainer = PPOTrainer("B", HYBRID, hyper, seed=0)
     demo = _demo(16)
     trainer.providers["gail"].set_demonstrations(demo)
-    from trainer.ppo.buffer import Trajectory
+    from trainer.common.trajectory import Trajectory
 
     out = trainer.policy.act([demo.obs[0][:10]],
                              memories=np.zeros((10, 8), np.float32))

@@ -14,8 +14,8 @@ from trainer.artifacts.stats import StatsAggregationMethod, StatsAggregator
 from trainer.config.env_vars import EnvVars, RankEnv
 from trainer.distributed import MASTER_PORT_BASE, Ranks, master_address
 from trainer.errors import ConfigError
-from trainer.ppo.adam import Adam
-from trainer.ppo.normalizer import Normalizer
+from trainer.common.adam import Adam
+from trainer.common.normalizer import Normalizer
 from tests.unit.test_ppo_numpy_update import _filled_trainer, _state, vec
 
 

@@ -1,4 +1,5 @@
-"""Simulator launching: executable lookup, argv order (docs/protocol.md §1.2), restart limits (docs/protocol.md §1.3), processes."""
+"""Simulator launching: executable lookup, argv order (docs/protocol.md, "Launching an executable"), restart
+limits (docs/protocol.md, "Timeouts and liveness"), processes."""
 from __future__ import annotations
 
 import os

@@ -18,11 +18,12 @@ from protos.types import (
     ObservationType,
 )
 from trainer.artifacts.onnx_export import export_to_bytes
-from trainer.ppo.buffer import Trajectory
+from trainer.common.trajectory import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.losses import masked_mean, policy_loss
-from trainer.ppo.networks import Actor
-from trainer.ppo.policy import Policy
+from trainer.common.masked import masked_mean
+from trainer.ppo.losses import policy_loss
+from trainer.common.networks import Actor
+from trainer.common.policy import Policy
 from trainer.ppo.trainer import PPOTrainer
 from trainer.rollout import AgentTracker
 

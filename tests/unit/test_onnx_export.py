@@ -1,4 +1,4 @@
-"""ONNX export checked with onnxruntime against the contract of docs/outputs.md §8 and the torch policy."""
+"""ONNX export checked with onnxruntime against the contract of docs/outputs.md, "The ONNX model" and the torch policy."""
 from __future__ import annotations
 
 import numpy as np
@@ -16,7 +16,7 @@ from protos.types import (
 )
 from trainer.artifacts.onnx_export import export_policy
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.policy import Policy
+from trainer.common.policy import Policy
 
 HYPER = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
 CONTINUOUS_OUTPUTS = ["continuous_actions", "continuous_action_output_shape", "deterministic_continuous_actions"]

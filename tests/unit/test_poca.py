@@ -10,8 +10,8 @@ from protos.types import (
 )
 from trainer.poca.networks import POCACritic
 from trainer.poca.trainer import POCATrainer
-from trainer.ppo.buffer import GroupColumns, Trajectory
-from trainer.ppo.gae import gae
+from trainer.common.trajectory import GroupColumns, Trajectory
+from trainer.common.gae import gae
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.rollout import GroupTracker
 
@@ -362,7 +362,7 @@ def group_recall_success(memory_size: int, rounds: int) -> float:
 
 @pytest.fixture
 def one_torch_thread():
-    """As a run (trainer/run.py configure_torch_threads): torch's thread pool on these tiny
+    """As a run (trainer/run_setup.py configure_torch_threads): torch's thread pool on these tiny
     networks only costs hand-offs, and on a loaded machine a great deal (measured 20x here)."""
     before = torch.get_num_threads()
     torch.set_num_threads(1)

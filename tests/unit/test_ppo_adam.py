@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.ppo.adam import Adam
-from trainer.ppo.layers import linear_layer
+from trainer.common.adam import Adam
+from trainer.common.layers import linear_layer
 
 
 def _net(seed):

@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trainer.ppo.buffer import Trajectory, UpdateBuffer
+from trainer.common.trajectory import Trajectory
+from trainer.ppo.update_buffer import UpdateBuffer
 
 
 def test_append_concatenate_clear():

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trainer.ppo.gae import discounted_returns, gae
-from trainer.ppo.schedules import decay
+from trainer.common.gae import discounted_returns, gae
+from trainer.common.schedules import decay
 
 
 def test_discounted_returns_by_hand():

@@ -10,7 +10,7 @@ from protos.types import (
     ObservationSpec,
     ObservationType,
 )
-from trainer.ppo.buffer import Trajectory
+from trainer.common.trajectory import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer
 

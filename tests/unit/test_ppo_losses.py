@@ -6,14 +6,15 @@ import math
 import pytest
 import torch
 
-from trainer.ppo.distributions import (
+from trainer.common.distributions import (
     categorical_entropy,
     categorical_log_prob,
     gaussian_entropy,
     gaussian_log_prob,
     mask_logits,
 )
-from trainer.ppo.losses import combined_entropy, policy_loss, ppo_loss, value_loss
+from trainer.common.distributions import combined_entropy
+from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
 
 
 def test_policy_loss_per_dimension_ratios_by_hand():

@@ -9,7 +9,7 @@ import torch
 from protos.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.errors import ConfigError
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.networks import Actor, Critic
+from trainer.common.networks import Actor, Critic
 
 
 def vector_spec(size: int) -> ObservationSpec:

@@ -6,7 +6,7 @@ import math
 import pytest
 import torch
 
-from trainer.ppo.normalizer import Normalizer
+from trainer.common.normalizer import Normalizer
 
 
 def test_initial_state_is_identity_within_clip():

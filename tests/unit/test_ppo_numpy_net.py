@@ -5,8 +5,8 @@ import torch
 
 from protos.types import ActionSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.networks import Actor
-from trainer.ppo.numpy_net import NumpyActor, supports
+from trainer.common.networks import Actor
+from trainer.common.numpy_net import NumpyActor, supports
 
 HP = PPOHyperparams(hidden_units=16, num_layers=2, normalize=True)
 
@@ -87,8 +87,8 @@ def test_load_state_dict_is_seen_and_visual_actors_are_not_supported():
 
 
 def test_numpy_critic_matches_torch_and_follows_normaliser_and_weight_changes():
-    from trainer.ppo.numpy_net import NumpyCritic
-    from trainer.ppo.networks import Critic
+    from trainer.common.numpy_net import NumpyCritic
+    from trainer.common.networks import Critic
 
     torch.manual_seed(0)
     critic = Critic((vec(3), vec(5)), ["extrinsic", "curiosity"], HP)

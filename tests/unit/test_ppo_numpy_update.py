@@ -14,8 +14,8 @@ import torch
 
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.ppo import numpy_update
-from trainer.ppo.adam import Adam
-from trainer.ppo.buffer import Trajectory
+from trainer.common.adam import Adam
+from trainer.common.trajectory import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer, normalize_advantages
 

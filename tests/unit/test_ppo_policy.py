@@ -15,7 +15,7 @@ from protos.types import (
     ObservationType,
 )
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.policy import Policy
+from trainer.common.policy import Policy
 
 HYPER = PPOHyperparams(hidden_units=16, num_layers=2)
 

@@ -17,7 +17,7 @@ from protos.types import (
 )
 from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
 from trainer.errors import ConfigError
-from trainer.ppo.buffer import Trajectory
+from trainer.common.trajectory import Trajectory
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer, normalize_advantages
 

@@ -12,7 +12,7 @@ import torch
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from tests.unit.test_ppo_trainer import expected_advantages, make_trajectory
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
-from trainer.ppo.reward_providers import CuriosityProvider, Experience, RNDProvider
+from trainer.common.reward_providers import CuriosityProvider, Experience, RNDProvider
 from trainer.ppo.trainer import PPOTrainer
 
 SPEC = BehaviorSpec(

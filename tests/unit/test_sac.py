@@ -11,7 +11,7 @@ import torch
 from torch import nn
 
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
-from trainer.ppo.buffer import Trajectory
+from trainer.common.trajectory import Trajectory
 from trainer.sac import losses
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.replay_buffer import ReplayBuffer

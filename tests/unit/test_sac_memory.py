@@ -10,7 +10,7 @@ import torch
 
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.artifacts.onnx_export import export_to_bytes
-from trainer.ppo.buffer import Trajectory
+from trainer.common.trajectory import Trajectory
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.replay_buffer import ReplayBuffer
 from trainer.sac.trainer import SACTrainer

@@ -35,10 +35,10 @@ def make(action_spec: ActionSpec, signals: tuple[str, ...], numpy: bool) -> SACT
                         learning_rate=3e-3, init_entcoef=0.3, tau=0.05, steps_per_update=4.0,
                         reward_signals=reward_signals,
                         reward_signal_networks={name: SignalNetwork(hidden_units=8) for name in signals})
-    trainer = SACTrainer("B", BehaviorSpec((vec(5, "a"), vec(3, "b")), action_spec), hp, seed=3)
-    assert numpy_step.supports(trainer) and trainer._numpy_step is not None
-    if not numpy:
-        trainer._numpy_step = None
+    # use_numpy_update: MLAGENTS_LIKE_NUMPY_UPDATE, the one switch of PPO's and SAC's numpy paths
+    trainer = SACTrainer("B", BehaviorSpec((vec(5, "a"), vec(3, "b")), action_spec), hp, seed=3,
+                         use_numpy_update=numpy)
+    assert numpy_step.supports(trainer) and (trainer._numpy_step is not None) == numpy
     return trainer
 
 

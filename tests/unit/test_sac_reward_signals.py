@@ -1,4 +1,4 @@
-"""SAC with curiosity and RND (the providers of trainer/ppo/reward_providers.py): the Q targets use
+"""SAC with curiosity and RND (the providers of trainer/common/reward_providers.py): the Q targets use
 each provider's reward of the sampled minibatch and bootstrap through episode ends, the learners
 step at reward_signal_steps_per_update, their rewards fall on revisited states, their statistics
 are those of the reference, and they survive a checkpoint."""
@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
-from trainer.ppo.buffer import Trajectory
+from trainer.common.trajectory import Trajectory
 from trainer.ppo.hyperparams import SignalNetwork
 from trainer.sac import losses
 from trainer.sac.hyperparams import SACHyperparams

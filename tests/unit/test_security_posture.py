@@ -10,7 +10,7 @@ import pytest
 
 from trainer.config.loader import read_yaml_file
 from trainer.errors import ConfigError
-from trainer.run import warn_if_not_loopback
+from trainer.run_setup import warn_if_not_loopback
 
 ROOT = Path(__file__).resolve().parents[2]
 

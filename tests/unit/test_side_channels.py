@@ -1,4 +1,4 @@
-"""Side channel framing and payloads, checked against hand-written bytes from docs/protocol.md §4.2."""
+"""Side channel framing and payloads, checked against hand-written bytes from docs/protocol.md, "Known channels"."""
 from __future__ import annotations
 
 import logging
@@ -11,7 +11,7 @@ from protos import side_channels as sc
 from protos.errors import ProtocolError
 from protos.types import StatsAggregationMethod
 
-# --- the four observed wire examples of docs/protocol.md §4.2, byte for byte --------------------------------
+# --- the four observed wire examples of docs/protocol.md, "Known channels", byte for byte ---------------
 
 GRAVITY_HEX = "07000000" + "gravity".encode().hex() + "00000000" + "c3f51c41"
 SCALE_HEX = "05000000" + "scale".encode().hex() + "01000000" + "2b000000" + "00000000" + "0000003f" + "00004040"
@@ -243,7 +243,7 @@ def test_unknown_channel_warned_once_per_id(caplog):
 
 
 def test_a_runs_simulators_warn_about_an_unknown_channel_once_between_them(caplog):
-    from trainer.run import make_routers
+    from trainer.side_channel_payloads import make_routers
 
     unknown = uuid.UUID("00000000-0000-0000-0000-0000000000cc")
     data = sc.pack_messages([(unknown, b"x")])

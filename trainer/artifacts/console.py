@@ -1,4 +1,4 @@
-"""Console output: the ML-Agents summary line per brain and a live progress line (docs/outputs.md §7).
+"""Console output: the ML-Agents summary line per brain and a live progress line (docs/outputs.md, "Outputs").
 
 Summary line, logged at INFO every summary_freq steps::
 

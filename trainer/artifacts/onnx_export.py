@@ -1,4 +1,4 @@
-"""Export a policy's actor to the ONNX model Unity's inference engine loads (docs/outputs.md §8).
+"""Export a policy's actor to the ONNX model Unity's inference engine loads (docs/outputs.md, "The ONNX model").
 
 Legacy TorchScript exporter, opset 9. Inputs obs_0..obs_{n-1} (+ action_masks, float 1 = allowed, only
 with discrete branches; + recurrent_in [batch, 1, memory_size], only with memory). Outputs, in order:
@@ -19,8 +19,8 @@ import torch
 from torch import nn
 
 from trainer.artifacts.atomic import atomic_write
-from trainer.ppo.networks import Actor
-from trainer.ppo.policy import CONTINUOUS_CLIP, Policy
+from trainer.common.networks import Actor
+from trainer.common.policy import CONTINUOUS_CLIP, Policy
 
 ONNX_OPSET = 9
 BATCH_AXIS = "batch"

@@ -5,7 +5,7 @@ Vocabulary follows ML-Agents: a *category* is a brain (behavior name, one Tensor
 :class:`StatsAggregator` until :meth:`StatsReporter.write` hands a ``{key: StatsSummary}`` dict to
 every writer and clears the brain's aggregator.
 
-Aggregation methods (docs/protocol.md §4.2):
+Aggregation methods (docs/protocol.md, "Known channels"):
 
 * ``AVERAGE``: the summary value is the mean of everything added since the last write.
 * ``SUM``: the summary value is the sum.
@@ -299,7 +299,7 @@ class StatsReporter:
         env_stats: Mapping[str, Sequence[tuple[float, StatsAggregationMethod]]],
         worker_id: int,
     ) -> None:
-        """Stats-side-channel values from one env step (docs/protocol.md §4.2).
+        """Stats-side-channel values from one env step (docs/protocol.md, "Known channels").
 
         Every stat is recorded under each brain in ``brains`` (the behaviors present in that
         step); MOST_RECENT stats are taken from worker 0 only.

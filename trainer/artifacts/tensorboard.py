@@ -1,4 +1,4 @@
-"""TensorBoard output: one event file per brain under ``results/<run-id>/<brain>/`` (docs/outputs.md §7).
+"""TensorBoard output: one event file per brain under ``results/<run-id>/<brain>/`` (docs/outputs.md, "Outputs").
 
 Event files are TFRecord files of ``Event`` protos (tensorboard's own protos; the framing is
 written here by ``EventFile``: importing tensorboard's writer costs ~0.2 s of every run's

@@ -1,4 +1,4 @@
-"""Hierarchical timers and gauges written to ``run_logs/timers.json`` (docs/outputs.md §7).
+"""Hierarchical timers and gauges written to ``run_logs/timers.json`` (docs/outputs.md, "Outputs").
 
 A :class:`TimerTree` is an ordinary object (no module globals), driven by the trainer's one
 thread. That keeps ``scope`` lock-free: entering and leaving costs two ``perf_counter`` calls, a dict

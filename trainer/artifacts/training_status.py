@@ -1,4 +1,4 @@
-"""``run_logs/training_status.json``: what --resume needs that is not inside a model (docs/outputs.md §7).
+"""``run_logs/training_status.json``: what --resume needs that is not inside a model (docs/outputs.md, "Outputs").
 
 Layout (one JSON object)::
 

@@ -1,4 +1,5 @@
-"""``mlagents-like-learn`` command line: the flags of ``mlagents-learn`` (docs/configuration.md §5) plus ``--bind``.
+"""``mlagents-like-learn`` command line: the flags of ``mlagents-learn`` plus ours (docs/configuration.md,
+"Command line"); each flag takes its dest, default and type from the settings field it sets.
 
 A flag overrides the YAML only if it was actually given on the command line; the given flags are
 tracked by the parser's actions (``namespace._given_flags``), not by comparing with defaults.
@@ -9,6 +10,7 @@ import argparse
 import dataclasses
 import logging
 import random
+import typing
 from typing import Any, Sequence
 
 from trainer.config.loader import check_run_options, load_yaml_run_options, prioritize_resume_init
@@ -16,6 +18,7 @@ from trainer.config.settings import (
     CheckpointSettings,
     EngineSettings,
     EnvSettings,
+    NetworkSettings,
     RunOptions,
     TorchSettings,
 )
@@ -90,75 +93,85 @@ class _ShippedFiles(argparse.Action):
         parser.exit(0)
 
 
+def _value_type(section: type, name: str) -> type | None:
+    """int or float for a numeric field (None allowed), else None: argparse keeps the string."""
+    hint = typing.get_type_hints(section)[name]
+    candidates = [arg for arg in typing.get_args(hint) if arg is not type(None)] or [hint]
+    return candidates[0] if candidates[0] in (int, float) else None
+
+
+def _setting_flag(group: Any, section: type, name: str, help: str, flag: str | None = None, **extra: Any) -> None:
+    """``--flag`` for the field ``section.name``: its dest is the field's name, its default the field's
+    default and its type the field's type (a bool field is a switch), so no default is written twice."""
+    default = {f.name: f.default for f in dataclasses.fields(section)}[name]
+    flag = flag or "--" + name.replace("_", "-")
+    if isinstance(default, bool):
+        group.add_argument(flag, dest=name, default=default, action=_StoreTrue, help=help, **extra)
+        return
+    value_type = _value_type(section, name)
+    if value_type is not None:
+        extra["type"] = value_type
+    group.add_argument(flag, dest=name, default=default, action=_Store, help=help, **extra)
+
+
 def _add_general_flags(parser: argparse.ArgumentParser) -> None:
-    add = parser.add_argument
-    add("trainer_config_path", nargs="?", default=None, help="ML-Agents trainer YAML (optional)")
-    add("--env", dest="env_path", default=None, action=_Store, metavar="ENV_PATH",
-        help="Unity executable to train, or stub:TASK for the built-in stub simulator; "
-        "without it, wait for the Unity Editor on port 5004")
-    add("--load", dest="load_model", action=_StoreTrue, help=argparse.SUPPRESS)
-    add("--resume", action=_StoreTrue, help="resume training from results/<run-id>")
-    add("--deterministic", action=_StoreTrue, help="act with the mean / argmax instead of sampling")
-    add("--force", action=_StoreTrue, help="overwrite an existing results/<run-id>")
-    add("--run-id", default="ppo", action=_Store, help="name of the run (results sub-folder)")
-    add("--initialize-from", metavar="RUN_ID", default=None, action=_Store,
-        help="initialize each behavior from results/<RUN_ID>/<behavior>/checkpoint.pt")
-    add("--seed", type=int, default=-1, action=_Store, help="random seed; -1 picks one in [0, 10000)")
-    add("--train", dest="train_model", action=_StoreTrue, help=argparse.SUPPRESS)
-    add("--inference", action=_StoreTrue, help="run the policy without training")
-    add("--base-port", type=int, default=5005, action=_Store, help="port of worker 0; worker i uses base+i")
-    add("--num-envs", type=int, default=1, action=_Store, help="number of simulator processes")
-    add("--num-areas", type=int, default=1, action=_Store, help="training areas per simulator")
-    add("--debug", action=_StoreTrue, help="debug logging with timestamps")
-    add("--env-args", default=None, nargs=argparse.REMAINDER, action=_Store,
-        help="everything after this flag is passed to the simulator")
-    add("--max-lifetime-restarts", type=int, default=10, action=_Store,
-        help="simulator crash restarts allowed over the run (-1: unlimited)")
-    add("--restarts-rate-limit-n", type=int, default=1, action=_Store,
-        help="restarts allowed per --restarts-rate-limit-period-s (-1: no rate limit)")
-    add("--restarts-rate-limit-period-s", type=int, default=60, action=_Store,
-        help="period of the restart rate limit, seconds")
-    add("--torch", action=_Removed, help="(removed) does nothing")
-    add("--tensorflow", action=_Removed, help="(removed) does nothing")
-    add("--results-dir", default="results", action=_Store, help="base folder of all runs")
-    add("--timeout-wait", type=int, default=60, action=_Store, help="seconds to wait for each simulator message")
-    add("--bind", default="127.0.0.1", action=_Store,
-        help="address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")
+    env, ckpt = EnvSettings, CheckpointSettings
+    parser.add_argument("trainer_config_path", nargs="?", default=None, help="ML-Agents trainer YAML (optional)")
+    _setting_flag(parser, env, "env_path", "Unity executable to train, or stub:TASK for the built-in stub simulator; "
+                  "without it, wait for the Unity Editor on port 5004", flag="--env", metavar="ENV_PATH")
+    _setting_flag(parser, ckpt, "load_model", argparse.SUPPRESS, flag="--load")
+    _setting_flag(parser, ckpt, "resume", "resume training from results/<run-id>")
+    _setting_flag(parser, NetworkSettings, "deterministic", "act with the mean / argmax instead of sampling")
+    _setting_flag(parser, ckpt, "force", "overwrite an existing results/<run-id>")
+    _setting_flag(parser, ckpt, "run_id", "name of the run (results sub-folder)")
+    _setting_flag(parser, ckpt, "initialize_from", "initialize each behavior from "
+                  "results/<RUN_ID>/<behavior>/checkpoint.pt", metavar="RUN_ID")
+    _setting_flag(parser, env, "seed", "random seed; -1 picks one in [0, 10000)")
+    _setting_flag(parser, ckpt, "train_model", argparse.SUPPRESS, flag="--train")
+    _setting_flag(parser, ckpt, "inference", "run the policy without training")
+    _setting_flag(parser, env, "base_port", "port of worker 0; worker i uses base+i")
+    _setting_flag(parser, env, "num_envs", "number of simulator processes")
+    _setting_flag(parser, env, "num_areas", "training areas per simulator")
+    _setting_flag(parser, RunOptions, "debug", "debug logging with timestamps")
+    _setting_flag(parser, env, "env_args", "everything after this flag is passed to the simulator",
+                  nargs=argparse.REMAINDER)
+    _setting_flag(parser, env, "max_lifetime_restarts", "simulator crash restarts allowed over the run (-1: unlimited)")
+    _setting_flag(parser, env, "restarts_rate_limit_n",
+                  "restarts allowed per --restarts-rate-limit-period-s (-1: no rate limit)")
+    _setting_flag(parser, env, "restarts_rate_limit_period_s", "period of the restart rate limit, seconds")
+    parser.add_argument("--torch", action=_Removed, help="(removed) does nothing")
+    parser.add_argument("--tensorflow", action=_Removed, help="(removed) does nothing")
+    _setting_flag(parser, ckpt, "results_dir", "base folder of all runs")
+    _setting_flag(parser, env, "timeout_wait", "seconds to wait for each simulator message")
+    _setting_flag(parser, env, "bind", "address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")
     shipped = parser.add_argument_group(title="Files the package ships (without a checkout of the repository)")
-    shipped.add_argument("--list-configs", nargs=0, action=_ShippedFiles, help="print the paths of the example configs, then exit")
+    shipped.add_argument("--list-configs", nargs=0, default=False, action=_ShippedFiles, help="print the paths of the example configs, then exit")
     shipped.add_argument("--copy-configs", metavar="DIR", action=_ShippedFiles,
                          help="copy the example configs into DIR, then exit")
     shipped.add_argument("--write-slurm-template", metavar="DIR", action=_ShippedFiles,
                          help="write the Slurm job template (train.sbatch, sweep.sh, sweep.py) into DIR, then exit")
     mirror = parser.add_argument_group(title="Behavior specs (docs/mirror.md)")
-    mirror.add_argument("--capture-spec", metavar="FILE", default=None, action=_Store,
-                        help="connect to --env, record its behavior specs to FILE after the first steps "
-                             "and exit without training")
-    mirror.add_argument("--check", action=_StoreTrue,
-                        help="check the trainer YAML against --spec FILE (or --env stub:mirror=FILE) and "
-                             "exit: 0 if it fits, 2 with one line per problem")
-    mirror.add_argument("--max-steps", dest="max_steps_override", type=int, metavar="N", default=None,
-                        action=_Store, help="a short run: every behavior stops at N steps and writes a summary "
-                                            "at least every N/10 steps (for CI on the mirror)")
-    mirror.add_argument("--spec", dest="spec_path", metavar="FILE", default=None, action=_Store,
-                        help="a behaviors.json (from --capture-spec or a run's run_logs) for --check")
+    _setting_flag(mirror, RunOptions, "capture_spec", "connect to --env, record its behavior specs to FILE after "
+                  "the first steps and exit without training", metavar="FILE")
+    _setting_flag(mirror, RunOptions, "check", "check the trainer YAML against --spec FILE (or --env "
+                  "stub:mirror=FILE) and exit: 0 if it fits, 2 with one line per problem")
+    _setting_flag(mirror, RunOptions, "max_steps_override", "a short run: every behavior stops at N steps and writes "
+                  "a summary at least every N/10 steps (for CI on the mirror)", flag="--max-steps", metavar="N")
+    _setting_flag(mirror, RunOptions, "spec_path", "a behaviors.json (from --capture-spec or a run's run_logs) "
+                  "for --check", flag="--spec", metavar="FILE")
 
 
 def _add_engine_and_torch_flags(parser: argparse.ArgumentParser) -> None:
     engine = parser.add_argument_group(title="Engine Configuration")
-    engine.add_argument("--width", type=int, default=84, action=_Store, help="window width, pixels")
-    engine.add_argument("--height", type=int, default=84, action=_Store, help="window height, pixels")
-    engine.add_argument("--quality-level", type=int, default=5, action=_Store, help="QualitySettings level")
-    engine.add_argument("--time-scale", type=float, default=20.0, action=_Store, help="Time.timeScale")
-    engine.add_argument("--target-frame-rate", type=int, default=-1, action=_Store,
-                        help="Application.targetFrameRate")
-    engine.add_argument("--capture-frame-rate", type=int, default=60, action=_Store, help="Time.captureFramerate")
-    engine.add_argument("--no-graphics", action=_StoreTrue, help="run simulators with -nographics -batchmode")
-    engine.add_argument("--no-graphics-monitor", action=_StoreTrue,
-                        help="like --no-graphics except for worker 0")
+    for name, help in (("width", "window width, pixels"), ("height", "window height, pixels"),
+                       ("quality_level", "QualitySettings level"), ("time_scale", "Time.timeScale"),
+                       ("target_frame_rate", "Application.targetFrameRate"),
+                       ("capture_frame_rate", "Time.captureFramerate"),
+                       ("no_graphics", "run simulators with -nographics -batchmode"),
+                       ("no_graphics_monitor", "like --no-graphics except for worker 0")):
+        _setting_flag(engine, EngineSettings, name, help)
     torch_group = parser.add_argument_group(title="Torch Configuration")
-    torch_group.add_argument("--torch-device", dest="device", default=None, action=_Store,
-                             help="torch device, e.g. cpu, cuda, cuda:0")
+    _setting_flag(torch_group, TorchSettings, "device", "torch device, e.g. cpu, cuda, cuda:0", flag="--torch-device")
 
 
 def build_parser() -> argparse.ArgumentParser:

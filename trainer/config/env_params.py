@@ -1,4 +1,5 @@
-"""Environment parameters: samplers, curriculum lessons and their YAML structuring (docs/configuration.md §6.7, docs/protocol.md §4.3).
+"""Environment parameters: samplers, curriculum lessons and their YAML structuring (docs/configuration.md,
+"environment_parameters"; seeds: docs/protocol.md, "Sampler seeds").
 
 A parameter is always stored as a curriculum. A plain number or a sampler becomes a one-lesson
 curriculum whose lesson is named after the parameter; ``configuration.yaml`` shows that form.
@@ -79,13 +80,13 @@ class MultiRangeUniformSampler:
 
 @dataclass(frozen=True)
 class HmmSampler:
-    """``count`` label sequences of ``length`` drawn from a hidden Markov model (seed 004's level
-    generator, ``unity_stub_env.hmm``): the model file ``model`` (written by ``unity-stub-env hmm
-    train``; a relative path is read from the working directory) or one trained on the inline
-    ``corpus`` lines with ``states`` states (fast method, 5 restarts). Drawn once per seed with the
-    alias sampler and sent as plain float parameters ``KEY.count``, ``KEY.length``, ``KEY.labels``
-    and ``KEY.0`` … ``KEY.{count*length-1}`` (label codes = positions in the model's sorted
-    labels; docs/protocol.md §4.4)."""
+    """``count`` label sequences of ``length`` drawn from a hidden Markov model (the runner thesis'
+    level generator, ``unity_stub_env.hmm``; docs/stub-tasks.md, "Seed projects"): the model file
+    ``model`` (written by ``unity-stub-env hmm train``; a relative path is read from the working
+    directory) or one trained on the inline ``corpus`` lines with ``states`` states (fast method,
+    5 restarts). Drawn once per seed with the alias sampler and sent as plain float parameters
+    ``KEY.count``, ``KEY.length``, ``KEY.labels`` and ``KEY.0`` … ``KEY.{count*length-1}`` (label
+    codes = positions in the model's sorted labels; docs/protocol.md, "Label sequences")."""
 
     model: str = ""
     corpus: tuple[str, ...] = ()
@@ -272,7 +273,8 @@ def structure_lesson(raw: Any, path: str) -> Lesson:
 
 
 def structure_parameter(name: str, raw: Any, path: str) -> EnvironmentParameterSettings:
-    """One parameter in any of the three forms of docs/configuration.md §6.7, checked as a lesson chain."""
+    """One parameter in any of the three forms of docs/configuration.md, "environment_parameters", checked as
+    a lesson chain."""
     if not (isinstance(raw, Mapping) and "curriculum" in raw):
         return EnvironmentParameterSettings((Lesson(name=name, value=structure_sampler(raw, path)),))
     check_known_keys(raw, ("curriculum",), path)
@@ -341,7 +343,8 @@ def sampler_as_dict(sampler: Sampler) -> dict:
 
 
 def environment_parameters_as_dict(params: Mapping[str, EnvironmentParameterSettings]) -> dict:
-    """The expanded one-lesson-curriculum form of docs/configuration.md §6.7, key order as the reference writes it."""
+    """The expanded one-lesson-curriculum form of docs/configuration.md, "environment_parameters", key order
+    as the reference writes it."""
     out = {}
     for name, settings in params.items():
         lessons = []
@@ -361,7 +364,7 @@ def environment_parameters_as_dict(params: Mapping[str, EnvironmentParameterSett
 def assign_seeds(
     params: Mapping[str, EnvironmentParameterSettings], run_seed: int
 ) -> dict[str, EnvironmentParameterSettings]:
-    """A copy where every lesson value with seed -1 gets ``run_seed + offset`` (docs/protocol.md §4.3).
+    """A copy where every lesson value with seed -1 gets ``run_seed + offset`` (docs/protocol.md, "Sampler seeds").
 
     The offset starts at 0 and grows by 1 for each such value, constants included, in parameter
     order and then lesson order. Values with an explicit seed keep it and use no offset.

@@ -13,30 +13,8 @@ template (docker/slurm/train.sbatch, docs/cluster.md) and reach the trainer thro
 environment: ``MLAGENTS_LIKE_IMAGE`` (run inside that container image) and ``MLAGENTS_LIKE_VENV``
 (the venv to run); the trainer accepts and ignores them.
 
-=============================  ================  ====================================================
-variable                       field             default and meaning
-=============================  ================  ====================================================
-MLAGENTS_LIKE_TORCH_THREADS    ``torch_threads``  1: torch's intra-op threads (trainer/run.py)
-MLAGENTS_LIKE_BLAS_THREADS     ``blas_threads``   None: numpy's BLAS gets 1 thread unless the user set
-                                                 OPENBLAS_NUM_THREADS / OMP_NUM_THREADS /
-                                                 MKL_NUM_THREADS (trainer/cli.py)
-MLAGENTS_LIKE_SPIN_WAIT_MS     ``spin_wait_s``    1 ms: how long a waiting side polls past the expected
-                                                 answer; 0 always sleeps (protos/pacing.py)
-MLAGENTS_LIKE_TRANSPORT        ``transport``      http2: the gRPC transport of the trainer's server and
-                                                 of the stubs it launches; or grpcio
-MLAGENTS_LIKE_NUMPY_UPDATE     ``numpy_update``   1: PPO's minibatch steps in numpy where the network
-                                                 allows it; 0 keeps torch autograd (trainer/ppo)
-MLAGENTS_LIKE_DIST_TIMEOUT_S   ``dist_timeout_s`` 300: seconds a rank waits for the others in a
-                                                 collective before it gives up (trainer/distributed.py)
-MLAGENTS_LIKE_DIST_SYNC_EVERY  ``dist_sync_      8: data-parallel ranks agree (stop, steps, normalisers,
-                               every``           updates) every this many exchanges (docs/cluster.md)
-MLAGENTS_LIKE_DEBUG_WEIGHTS    ``debug_weights``  None: a path; each rank r of a data-parallel run
-                                                 appends a hash of its weights after every update
-                                                 to PATH.rank<r> (the tests compare them)
-MLAGENTS_LIKE_CRASH_AT         ``crash_at``       unset: a test hook, ``POINT:N[:SIGNAL]`` makes the
-                                                 trainer SIGKILL itself (or send SIGNAL) the Nth time
-                                                 it reaches the named point (trainer/crash_points.py)
-=============================  ================  ====================================================
+The variables, their defaults and what each does: docs/configuration.md, "Environment variables"
+(tests/unit/test_config_docs.py checks that table against ``KNOWN`` and ``EnvVars``).
 
 Data-parallel ranks (docs/cluster.md) are found from variables of other families, read here too:
 torchrun's ``RANK``, ``WORLD_SIZE``, ``LOCAL_RANK``, ``MASTER_ADDR``, ``MASTER_PORT`` first, else

@@ -1,4 +1,4 @@
-"""Convert old trainer files to the modern layout on load (docs/configuration.md §6.8).
+"""Convert old trainer files to the modern layout on load (docs/configuration.md, "Legacy formats").
 
 * ML-Agents 0.x flat format: top-level behavior names plus ``default``, each a flat dict with
   ``trainer: ppo``, ``lambd``, ``num_layers``, ``hidden_units``, ``normalize``, ``use_recurrent``, ...

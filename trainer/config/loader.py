@@ -113,7 +113,7 @@ def _structure_section(cls: type, raw: Mapping, key: str) -> Any:
 
 
 def run_options_from_dict(raw: Mapping, config_path: str | None = None) -> RunOptions:
-    """A modern-layout dict -> RunOptions, with every schema and range check of docs/configuration.md §6."""
+    """A modern-layout dict -> RunOptions, with every schema and range check of docs/configuration.md, "YAML"."""
     raw = require_mapping(raw, "the configuration")
     check_known_keys(raw, TOP_LEVEL_KEYS, "")
     default_raw = raw.get("default_settings")

@@ -1,4 +1,5 @@
-"""Typed, frozen run configuration in the ML-Agents Release-22 schema (docs/configuration.md §5, docs/configuration.md §6).
+"""Typed, frozen run configuration in the ML-Agents Release-22 schema (docs/configuration.md, "Command
+line" and "YAML").
 
 Field order is the order ``configuration.yaml`` is written in, which follows the reference.
 Every default is the reference default. Building these from YAML (with all the checks) is
@@ -28,7 +29,10 @@ DEFAULT_CHECKPOINT_NAME = "checkpoint.pt"
 
 
 @dataclass(frozen=True)
-class PPOSettings:
+class OnPolicySettings:
+    """The hyperparameters PPO and MA-POCA share (``trainer_type: poca`` takes exactly these; as in
+    ML-Agents, its beta/epsilon schedules do not follow learning_rate_schedule: docs/poca.md)."""
+
     batch_size: int = 1024
     buffer_size: int = 10240
     learning_rate: float = 3.0e-4
@@ -36,10 +40,16 @@ class PPOSettings:
     epsilon: float = 0.2
     lambd: float = 0.95
     num_epoch: int = 3
-    shared_critic: bool = False
     learning_rate_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
     beta_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
     epsilon_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
+
+
+@dataclass(frozen=True)
+class PPOSettings(OnPolicySettings):
+    """``trainer_type: ppo``: the on-policy hyperparameters plus ``shared_critic``."""
+
+    shared_critic: bool = False
 
 
 @dataclass(frozen=True)
@@ -65,20 +75,8 @@ class SACSettings:
 
 
 @dataclass(frozen=True)
-class POCASettings:
-    """``trainer_type: poca`` hyperparameters: PPO's without shared_critic, and (as in ML-Agents)
-    beta/epsilon schedules do not follow learning_rate_schedule (docs/poca.md)."""
-
-    batch_size: int = 1024
-    buffer_size: int = 10240
-    learning_rate: float = 3.0e-4
-    beta: float = 5.0e-3
-    epsilon: float = 0.2
-    lambd: float = 0.95
-    num_epoch: int = 3
-    learning_rate_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
-    beta_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
-    epsilon_schedule: str = field(default="linear", metadata={"choices": SCHEDULES})
+class POCASettings(OnPolicySettings):
+    """``trainer_type: poca``: the on-policy hyperparameters, without ``shared_critic``."""
 
 
 #: trainer_type -> its hyperparameters class
@@ -175,7 +173,7 @@ def _default_reward_signals() -> dict[str, RewardSignalSettings]:
 @dataclass(frozen=True)
 class TrainerSettings:
     trainer_type: str = "ppo"
-    hyperparameters: PPOSettings | SACSettings = field(default_factory=PPOSettings)
+    hyperparameters: OnPolicySettings | SACSettings = field(default_factory=PPOSettings)
     checkpoint_interval: int = 500000
     network_settings: NetworkSettings = field(default_factory=NetworkSettings)
     reward_signals: dict[str, RewardSignalSettings] = field(default_factory=_default_reward_signals)

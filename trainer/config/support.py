@@ -13,7 +13,7 @@ from trainer.config.settings import RunOptions, TrainerSettings
 from trainer.errors import ConfigError
 
 # reward signals the trainers compute (trainer/ppo/trainer.py and trainer/sac/trainer.py check
-# the same list: both take every provider of trainer/ppo/reward_providers.py)
+# the same list: both take every provider of trainer/common/reward_providers.py)
 SUPPORTED_REWARD_SIGNALS = ("extrinsic", "curiosity", "rnd", "gail")
 
 

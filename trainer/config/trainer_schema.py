@@ -1,4 +1,5 @@
-"""Raw ``behaviors.<name>`` / ``default_settings`` blocks -> checked ``TrainerSettings`` (docs/configuration.md §6.2-§6.6)."""
+"""Raw ``behaviors.<name>`` / ``default_settings`` blocks -> checked ``TrainerSettings`` (docs/configuration.md,
+"Per behavior" and the sections after it)."""
 from __future__ import annotations
 
 import dataclasses
@@ -12,6 +13,7 @@ from trainer.config.settings import (
     TRAINER_TYPES,
     BehavioralCloningSettings,
     NetworkSettings,
+    OnPolicySettings,
     PPOSettings,
     SACSettings,
     SelfPlaySettings,
@@ -49,7 +51,7 @@ def check_trainer_type(value: Any, path: str) -> str:
     )
 
 
-def structure_hyperparameters(raw: Any, path: str, trainer_type: str = "ppo") -> PPOSettings | SACSettings:
+def structure_hyperparameters(raw: Any, path: str, trainer_type: str = "ppo") -> OnPolicySettings | SACSettings:
     """The hyperparameters class of ``trainer_type``; for PPO with the schedule-copy rule:
     beta/epsilon schedules follow learning_rate_schedule when only it is given."""
     raw = dict(require_mapping(raw, path))
@@ -134,7 +136,7 @@ def check_network_settings(network: NetworkSettings, path: str) -> None:
         _require(memory.sequence_length >= 1, f"{path}.memory.sequence_length", ">= 1", memory.sequence_length)
 
 
-def check_hyperparameters(hp: PPOSettings | SACSettings, path: str) -> None:
+def check_hyperparameters(hp: OnPolicySettings | SACSettings, path: str) -> None:
     _require(hp.batch_size >= 1, f"{path}.batch_size", ">= 1", hp.batch_size)
     if isinstance(hp, SACSettings):
         check_sac_hyperparameters(hp, path)

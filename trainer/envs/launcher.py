@@ -1,6 +1,7 @@
 """Launching simulators: find the executable, build its command line, run it, and decide restarts.
 
-docs/protocol.md §1.2 (executable lookup, argument order) and docs/protocol.md §1.3 (close timeouts, restart limits).
+docs/protocol.md, "Launching an executable" (executable lookup, argument order) and "Timeouts and
+liveness" (close timeouts, restart limits).
 ``--env stub:TASK`` launches the built-in MuJoCo stub (``python -m unity_stub_env.cli --task TASK``)
 with the same Unity-style arguments, so everything downstream treats both alike.
 """
@@ -151,7 +152,7 @@ def build_launch_command(
     stub_spin_wait: float = 0.0,
     stub_transport: str = "http2",
 ) -> list[str]:
-    """The argv for worker ``worker_id``, in the order of docs/protocol.md §1.2.
+    """The argv for worker ``worker_id``, in the order of docs/protocol.md, "Launching an executable".
 
     ``env_path`` is a resolved executable path or ``stub:TASK``. ``seed`` and ``num_areas`` are
     not command-line arguments (they travel in the initialization message); they are accepted so
@@ -339,7 +340,8 @@ class SimulatorProcess:
 # Restarts
 # --------------------------------------------------------------------------------------------
 class RestartPolicy:
-    """Whether a crashed simulator may be restarted (docs/protocol.md §1.3); the pool keeps one per worker.
+    """Whether a crashed simulator may be restarted (docs/protocol.md, "Timeouts and liveness"); the
+    pool keeps one per worker.
 
     A restart is allowed while fewer than ``max_lifetime_restarts`` restarts happened in total
     (-1: unlimited) and fewer than ``rate_limit_n`` happened in the last ``rate_limit_period_s``

@@ -6,8 +6,9 @@ for their replies, so N simulators run in parallel while the trainer waits once.
 lockstep (every worker every step): with seeds fixed, a run is repeatable, which ML-Agents' "go on
 when any worker replied" manager does not give.
 
-A worker whose simulator dies is restarted under the restart policy (docs/protocol.md §1.3); after a restart
-every worker is reset and the caller is told (``restarted``) so it drops partial trajectories.
+A worker whose simulator dies is restarted under the restart policy (docs/protocol.md, "Timeouts and
+liveness"); after a restart every worker is reset and the caller is told (``restarted``) so it drops
+partial trajectories.
 """
 from __future__ import annotations
 

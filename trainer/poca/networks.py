@@ -25,8 +25,8 @@ from torch import nn
 
 from protos.types import ActionSpec, ObservationSpec
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.layers import XAVIER_UNIFORM, hidden_layers, linear_layer
-from trainer.ppo.networks import LSTMMemory, ObservationEncoder, check_network_settings
+from trainer.common.layers import XAVIER_UNIFORM, hidden_layers, linear_layer
+from trainer.common.networks import LSTMMemory, ObservationEncoder, check_network_settings
 
 
 class EntityAttention(nn.Module):

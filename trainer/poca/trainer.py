@@ -36,10 +36,11 @@ import torch
 from protos.types import BehaviorSpec
 from trainer.errors import ConfigError
 from trainer.poca.networks import POCACritic
-from trainer.ppo.buffer import GroupColumns, Trajectory
-from trainer.ppo.gae import gae
+from trainer.common.trajectory import GroupColumns, Trajectory
+from trainer.common.gae import gae
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.losses import masked_mean, policy_loss, ppo_loss, value_loss
+from trainer.common.masked import masked_mean
+from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
 from trainer.ppo.trainer import PPOTrainer, _obs_key
 
 GROUP_FIELDS = ("mates_continuous", "mates_discrete", "mates_present")
@@ -175,7 +176,8 @@ class POCATrainer(PPOTrainer):
             advantages.append(returns - baselines[name])
             fields[f"baselines:{name}"] = baselines[name]
             fields[f"returns:{name}"] = returns
-            label = getattr(self.providers.get(name), "stat_name", name.capitalize())
+            provider = self.providers.get(name)
+            label = name.capitalize() if provider is None else provider.stat_name
             stats[f"Policy/{label} Value Estimate"] = float(np.mean(values[name]))
             stats[f"Policy/{label} Baseline Estimate"] = float(np.mean(baselines[name]))
         if traj.done:

@@ -3,14 +3,7 @@ from __future__ import annotations
 
 import torch
 
-
-def masked_mean(values: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
-    """Mean of ``values`` [n, ...] over the rows where mask [n] is nonzero (all rows if None);
-    recurrent minibatches mark the padding that completes each sequence with 0."""
-    if mask is None:
-        return torch.mean(values)
-    weights = mask.reshape(-1, *([1] * (values.ndim - 1))).to(values.dtype).expand_as(values)
-    return (values * weights).sum() / torch.clamp(weights.sum(), min=1.0)
+from trainer.common.masked import masked_mean
 
 
 def policy_loss(advantages: torch.Tensor, log_probs: torch.Tensor, old_log_probs: torch.Tensor,
@@ -45,16 +38,3 @@ def ppo_loss(policy_term: torch.Tensor, value_term: torch.Tensor, entropy: torch
              mask: torch.Tensor | None = None) -> torch.Tensor:
     """policy_loss + 0.5 * value_loss - beta * mean(entropy); entropy [n]."""
     return policy_term + 0.5 * value_term - beta * masked_mean(entropy, mask)
-
-
-def combined_entropy(continuous_entropy: torch.Tensor | None, discrete_entropies: list[torch.Tensor]
-                     ) -> torch.Tensor:
-    """Policy entropy per agent: mean over Gaussian dims [n, c] plus the sum of branch entropies ([n] each)."""
-    total: torch.Tensor | None = None
-    if continuous_entropy is not None:
-        total = continuous_entropy.mean(dim=1)
-    for branch_entropy in discrete_entropies:
-        total = branch_entropy if total is None else total + branch_entropy
-    if total is None:
-        raise ValueError("a policy needs at least one continuous dimension or discrete branch")
-    return total

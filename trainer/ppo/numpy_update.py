@@ -5,8 +5,8 @@ tensor ops, and in torch most of its ~3 ms go to per-op dispatch and the autogra
 (measured: backward alone 36 % of an update). The same arithmetic as numpy matmuls takes a
 fraction of that. The networks are those of networks.py, read through numpy_net.py: forward
 and backward run on numpy views of the torch parameters, and Adam (adam.py, the one optimiser)
-steps them in place, so torch, acting, checkpoints and ONNX export see every change. tests/unit/test_ppo_numpy_update.py checks the
-gradients against autograd on the same modules, and losses and weights after several steps
+steps them in place, so torch, acting, checkpoints and ONNX export see every change.
+tests/unit/test_ppo_numpy_update.py checks the gradients against autograd on the same modules, and losses and weights after several steps
 against the torch path (autograd + the same Adam), for continuous, discrete with masks and
 hybrid policies.
 
@@ -22,14 +22,10 @@ PPOTrainer._minibatch_loss); with old values = returns the clipped branch never 
 The critic's half in a forked child (``_CriticChild``): while the trainer updates, the simulators
 wait for its actions, so the second CPU is idle. The actor's and the critic's halves of the steps
 touch disjoint parameters, so the child steps the critic while the parent steps the actor, and
-the result is bit for bit that of one process. Measured again 2026-11-25 (ball3d-sized update:
-12000 experiences, 3 epochs of 64-row minibatches, 2 x 128 units; wall time, min of 5; 1 BLAS
-thread as the trainer runs; 2 vCPUs shared with other jobs): with the second CPU mostly idle
-(load ~1.3) 0.33 s in one process, 0.18 s with the child; with it busy (load ~2) 0.32-0.33 s
-against 0.30-0.37 s, no gain. It pays only with an idle second CPU, which is what the simulators
-leave during an update on a machine of our own (training runs measured 0.55 -> 0.32-0.40 s);
-with 2 BLAS threads per process the two processes oversubscribe the CPUs (0.66 s). The
-end-to-end effect still has to be measured on a quiet machine. A child that dies, or
+the result is bit for bit that of one process. It pays only with an idle second CPU, which is what
+the simulators leave during an update on a machine of our own, and with 1 BLAS thread per process
+(2 oversubscribe the CPUs); the measurements: docs/performance.md, "The PPO update in numpy and on
+two CPUs". A child that dies, or
 does not finish within max(FORK_TIMEOUT_MIN, FORK_TIMEOUT_FACTOR x the parent's own half),
 is killed and reaped; the parent then steps the critic itself (its critic is untouched until a
 child's result is copied in), says so once, and stops forking for the rest of the run.
@@ -49,9 +45,9 @@ import time
 import numpy as np
 
 from trainer.envs.cpus import usable_cpus
-from trainer.ppo import numpy_net
-from trainer.ppo.adam import Adam, Stretch
-from trainer.ppo.distributions import EPSILON, MASKED_LOGIT_OFFSET
+from trainer.common import numpy_net
+from trainer.common.adam import Adam, Stretch
+from trainer.common.distributions import EPSILON, MASKED_LOGIT_OFFSET
 
 logger = logging.getLogger(__name__)
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))

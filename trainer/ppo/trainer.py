@@ -14,17 +14,21 @@ import torch
 
 from trainer.config.support import SUPPORTED_REWARD_SIGNALS
 from trainer.errors import ConfigError
-from trainer.ppo import numpy_net, numpy_update
-from trainer.ppo.adam import Adam
-from trainer.ppo.buffer import Trajectory, UpdateBuffer
-from trainer.ppo.numpy_net import NumpyCritic
-from trainer.ppo.gae import gae
+from trainer.common import numpy_net
+from trainer.ppo import numpy_update
+from trainer.common.adam import Adam
+from trainer.common.trajectory import Trajectory
+from trainer.ppo.update_buffer import UpdateBuffer
+from trainer.common.numpy_net import NumpyCritic
+from trainer.common.gae import gae
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.losses import masked_mean, policy_loss, ppo_loss, value_loss
-from trainer.ppo.networks import Critic
-from trainer.ppo.policy import Policy
-from trainer.ppo.reward_providers import Experience, load_providers, make_providers
-from trainer.ppo.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
+from trainer.common.masked import masked_mean
+from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
+from trainer.common.networks import Critic
+from trainer.common.policy import Policy
+from trainer.common.reward_providers import Experience, load_providers, make_providers
+from trainer.common.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
+from trainer.common.trainer_interface import Trainer
 from protos.types import BehaviorSpec
 
 ADVANTAGE_STD_EPSILON = 1e-10
@@ -44,7 +48,7 @@ def normalize_advantages(advantages: np.ndarray) -> np.ndarray:
     return ((advantages - advantages.mean()) / (advantages.std() + ADVANTAGE_STD_EPSILON)).astype(np.float32)
 
 
-class PPOTrainer:
+class PPOTrainer(Trainer):
     """PPO for one brain: ``policy`` acts, the critic estimates values, one Adam updates both."""
 
     def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams,
@@ -72,7 +76,7 @@ class PPOTrainer:
         # curiosity / rnd: their own networks and optimizers (reward_providers.py)
         self.providers = make_providers(behavior_spec, hyperparams, seed + 4)
         self._needs_next_obs = any(p.needs_next_obs for p in self.providers.values())
-        self._needs_done = any(getattr(p, "needs_done", False) for p in self.providers.values())  # gail
+        self._needs_done = any(p.needs_done for p in self.providers.values())  # gail with use_actions
         self._episode_intrinsic: dict[Any, dict[str, float]] = {}  # episode -> reward sums so far
         # LSTM: experiences train in sequences of this length; the critic's memory at the end of an
         # episode's last trajectory is where its next trajectory starts
@@ -177,8 +181,8 @@ class PPOTrainer:
             advantages.append(advantage)
             fields[f"values:{name}"] = values[name]
             fields[f"returns:{name}"] = returns
-            stats[f"Policy/{getattr(provider, 'stat_name', name.capitalize())} Value Estimate"] = float(
-                np.mean(values[name]))
+            label = name.capitalize() if provider is None else provider.stat_name
+            stats[f"Policy/{label} Value Estimate"] = float(np.mean(values[name]))
         if traj.done:
             self._episode_intrinsic.pop(traj.episode, None)
         fields["advantages"] = (advantages[0] if len(advantages) == 1  # the mean of one row is that row
@@ -407,16 +411,15 @@ class PPOTrainer:
         """Every optimiser of this brain: PPO's, each curiosity / rnd / gail learner's, then
         behavioral cloning's."""
         bc = [] if self.behavioral_cloning is None else [self.behavioral_cloning.optimizer]
-        return [self.optimizer, *(p.optimizer for p in self.providers.values() if hasattr(p, "optimizer")), *bc]
+        return [self.optimizer, *(p.optimizer for p in self.providers.values()), *bc]
 
     def normalizers(self) -> list:
         """Every observation normaliser of the actor, the critic and the curiosity / rnd networks
         (a shared body's once), in a fixed order."""
-        from trainer.ppo.normalizer import Normalizer
+        from trainer.common.normalizer import Normalizer
 
         modules = [self.policy.actor, self.critic]
-        modules += [getattr(p, name) for p in self.providers.values() for name in ("network", "target", "predictor")
-                    if isinstance(getattr(p, name, None), torch.nn.Module)]
+        modules += [module for p in self.providers.values() for module in p.modules()]
         seen, found = set(), []
         for module in modules:
             for m in module.modules():

@@ -4,4 +4,5 @@
   of the answer; version check
 * ``png``    — PNG camera observations → float32 C×H×W
 * ``server`` — ``UnityEndpoint``: the gRPC server side of one simulator connection
+* ``http2_server`` — the HTTP/2 server of unary gRPC calls it runs on (framing: ``protos/http2.py``)
 """

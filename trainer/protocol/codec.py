@@ -13,11 +13,8 @@ Two decode paths, no more (docs/protocol.md):
   message bytes before parsing (``records.split_agent_lists``) and read as one byte matrix
   (``records.decode``); whatever that reader does not handle falls back to the protobuf path.
 
-Measured per call (min of 300 x 20) on 60 consecutive stub messages under random actions, so
-with finished agents among them (2-vCPU VM, 2026-11-25): the records path decodes 64 basic agents
-in 146 us against 180 us through protobuf, 96 ball3d agents in 112 against 152 us; with fewer
-agents it loses (1 basic agent: 59 against 26 us; 12 ball3d agents: 92 against 37 us), hence
-``records.MIN_ROWS`` = 64.
+The records path wins for many agents and loses for few (its fixed cost is numpy's), hence
+``records.MIN_ROWS`` = 64; the measurements: docs/performance.md, "The byte codec".
 """
 from __future__ import annotations
 
@@ -72,7 +69,7 @@ _VERSION_RE = re.compile(r"(\d+)\.(\d+)(?:\.(\d+))?(?:[ab]\d+)?")  # StrictVersi
 
 # --------------------------------------------------------------------------- handshake helpers
 def check_communication_version(unity_version: str) -> None:
-    """Raise UnityVersionError unless Unity's communication API can talk to ours (docs/protocol.md §1.6).
+    """Raise UnityVersionError unless Unity's communication API can talk to ours (docs/protocol.md, "Version checks").
 
     Unity major 0: major and minor must equal ours. Otherwise the majors must be equal.
     """
@@ -99,7 +96,7 @@ def check_communication_version(unity_version: str) -> None:
 
 # --------------------------------------------------------------------------- behavior specs
 # Bounds on what a simulator may declare, checked before anything is allocated for it
-# (docs/protocol.md §3.2, "Limits"). Real games declare tens of actions and observations of at
+# (docs/protocol.md, "Behavior spec", "Limits"). Real games declare tens of actions and observations of at
 # most a few hundred thousand floats; these leave a wide margin and keep the trainer's memory
 # for one behavior within a budget: the policy's output layer is at most
 # (MAX_CONTINUOUS_ACTIONS + MAX_DISCRETE_OPTIONS) x hidden_units floats (36 MiB at 512 units),
@@ -115,7 +112,7 @@ MAX_DECODED_IMAGE_BYTES = 1 << 30
 
 
 def behavior_spec_from_proto(brain_params, agent_info) -> BehaviorSpec:
-    """BrainParametersProto + the behavior's first AgentInfoProto → BehaviorSpec (docs/protocol.md §3.2).
+    """BrainParametersProto + the behavior's first AgentInfoProto → BehaviorSpec (docs/protocol.md, "Behavior spec").
 
     Raises ProtocolError for a spec the trainer cannot train, or one beyond the limits above."""
     name = brain_params.brain_name
@@ -318,7 +315,8 @@ def decode_rl_output(output, known_specs: Mapping[str, BehaviorSpec],
 
 def _drop_non_finite(behavior: str, fields: records.Decoded) -> tuple[records.Decoded, Dropped | None]:
     """``fields`` without the agents whose reward, group reward or any observation holds NaN or
-    Inf (docs/protocol.md §3.1): they never reach the networks. Also what was dropped, or None."""
+    Inf (docs/protocol.md, "Simulator → trainer"): they never reach the networks. Also what was dropped,
+    or None."""
     # the common message: NaN and Inf propagate into a Python sum of the rewards (0.3 us for 12
     # agents, where two numpy checks cost 2 us), then one pass over each observation array
     if (math.isfinite(sum(fields.reward.tolist()) + sum(fields.group_reward.tolist()))
@@ -647,12 +645,11 @@ def encode_answer(actions: Mapping[str, ActionTuple], side_channel: bytes, comma
 def agent_actions_bytes(continuous: np.ndarray, discrete: np.ndarray) -> bytes:
     """The serialized ListAgentActionProto of n agents (float32 [n, c], int32 [n, b]).
 
-    Two writers of the same bytes, because each loses badly where the other wins (min per call,
-    stub-shaped actions, 2026-11-25): rows of one byte matrix (``wire.repeated_rows``) pay
-    numpy's fixed cost, 11.1 us for one basic agent against 3.7 us for a plain loop; the loop
-    pays per agent, 58.9 us for 96 ball3d agents and 69.0 us for 64 basic ones against 11.4
-    and 11.8 us for the matrix (at 12 agents they tie, 9.3 / 9.5 us). So the matrix from
-    ``wire.MIN_MATRIX_ROWS`` agents on, as long as every discrete action is one varint byte.
+    Two writers of the same bytes, because each loses badly where the other wins: rows of one byte
+    matrix (``wire.repeated_rows``) pay numpy's fixed cost, which a plain loop does not for one
+    agent; the loop pays per agent, which the matrix does not for many (docs/performance.md, "The
+    byte codec", has the numbers). So the matrix from ``wire.MIN_MATRIX_ROWS`` agents on, as long
+    as every discrete action is one varint byte.
     """
     n, b = len(discrete), discrete.shape[1]
     if n >= wire.MIN_MATRIX_ROWS and (b == 0 or (discrete.min() >= 0 and discrete.max() < 0x80)):

@@ -1,4 +1,5 @@
-"""PNG camera observations (docs/protocol.md §3.3): one or more PNG files concatenated, mapped to C×H×W.
+"""PNG camera observations (docs/protocol.md, "Observation payloads"): one or more PNG files
+concatenated, mapped to C×H×W.
 
 Unity packs up to 3 channels per PNG and concatenates the files; ``compressed_channel_mapping``
 then says which output channel each decoded channel feeds (``-1`` drops it, shared targets are

@@ -1,4 +1,4 @@
-"""The gRPC server end of ONE simulator connection (docs/protocol.md §1).
+"""The gRPC server end of ONE simulator connection (docs/protocol.md, "Transport").
 
 The simulator (Unity or unity-stub-env) is the gRPC client: every message it sends is the request
 of an ``Exchange`` call, and the trainer's next message is that call's response. Two transports
@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Callable, Mapping
 
 from protos.communicator_objects import unity_message_pb2
 from protos.errors import ProtocolError
-from protos.http2 import GRPC_INTERNAL, Http2Transport
+from protos.http2 import GRPC_INTERNAL
 from protos.types import ActionTuple, BehaviorSpec, StepResult
 from protos.versions import COMMUNICATION_VERSION, PACKAGE_VERSION, all_true_capabilities
 from trainer.config.env_vars import TRANSPORTS
@@ -41,6 +41,7 @@ from trainer.errors import (
     UnityTimeOutError,
 )
 from trainer.protocol import codec
+from trainer.protocol.http2_server import Http2Transport
 from trainer.stop import STOP
 
 if TYPE_CHECKING:  # grpcio is imported by its transport only (MLAGENTS_LIKE_TRANSPORT=grpcio)
@@ -128,7 +129,7 @@ class _GrpcioTransport:
         self.client_gone = False
         # the peer (grpcio's "ipv4:host:port", one per client connection) whose calls the trainer
         # takes; another peer's calls are refused while it has not gone, as protos.http2 does, so
-        # a second client on the port cannot inject steps into the session (docs/protocol.md §1.8)
+        # a second client on the port cannot inject steps into the session (docs/protocol.md, "Malformed HTTP/2")
         self.session: str | None = None
         self._session_gone = False  # its client dropped a call unanswered: the next peer takes over
 
@@ -398,7 +399,7 @@ class UnityEndpoint:
                 )
         for name, dropped in self._dropped.items():
             # the simulator matches actions to its agents by position: the agents left out for
-            # NaN/Inf get zero actions in their places (docs/protocol.md §3.1)
+            # NaN/Inf get zero actions in their places (docs/protocol.md, "Simulator → trainer")
             owed = self.behavior_specs[name].action_spec.empty_action(dropped.deciding)
             if len(dropped.kept):
                 continuous, discrete = codec.as_action_matrices(full_actions[name])

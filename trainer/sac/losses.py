@@ -12,7 +12,7 @@ from typing import Sequence
 import torch
 from torch import nn
 
-from trainer.ppo.distributions import gaussian_log_prob
+from trainer.common.distributions import gaussian_log_prob
 
 CONTINUOUS_TARGET_ENTROPY_SCALE = 1.0  # target entropy -1 nat per continuous dimension
 DISCRETE_TARGET_ENTROPY_SCALE = 0.2  # 0.2 * log(k) per branch: about epsilon-greedy 0.05

@@ -1,13 +1,10 @@
 """SAC gradient steps in numpy with hand-written gradients, for vector observations without memory.
 
 Why: SAC takes one gradient step per ``steps_per_update`` agent steps on five small networks
-(policy, V, target V, Q1, Q2). In torch that step is ~1,000 Python-level calls (~2,600 tensor
-ops; autograd's backward 28 % of it), 12-14 ms under load on basic, and it was 40 % of our
-trainer's time against the real mlagents-learn (bench/RESULTS.md, 2026-11-25). The same
-arithmetic in numpy is ~430 Python calls: measured 2026-11-27 (bench/sac_step.py, min of 7 x 50
-steps, load ~19 on 2 vCPUs) 17.7 -> 3.4 ms per step on basic, 18.1 -> 3.6 ms on ball3d; in a
-20k-step basic run against mlagents-learn our trainer's CPU-second ratio went ~6x -> 8.1-9.7x
-(docs/sac.md "Speed", bench/RESULTS.md). As PPO's numpy_update.py: the networks are those of
+(policy, V, target V, Q1, Q2). In torch that step is about a thousand Python-level calls and
+was the largest part of our trainer's time against the real mlagents-learn; the same arithmetic
+in numpy is well under half as many calls and several times faster (bench/sac_step.py measures
+it; the numbers: docs/sac.md, "Speed", and bench/RESULTS.md). As PPO's numpy_update.py: the networks are those of
 networks.py read through numpy_net.py (numpy views of the torch parameters, no copies); Adam
 (adam.py) steps them in place, so torch, acting, checkpoints and ONNX export see every change.
 tests/unit/test_sac_numpy_step.py checks the gradients against autograd on the same modules and
@@ -36,9 +33,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from trainer.ppo import numpy_net
-from trainer.ppo.distributions import EPSILON
-from trainer.ppo.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN
+from trainer.common import numpy_net
+from trainer.common.distributions import EPSILON
+from trainer.common.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN
 from trainer.sac import losses
 from trainer.sac.policy import _entropy, _numpy_squashed_log_prob
 

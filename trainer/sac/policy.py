@@ -17,8 +17,8 @@ import numpy as np
 import torch
 
 from protos.types import ActionTuple
-from trainer.ppo.distributions import EPSILON
-from trainer.ppo.policy import Policy, PolicyOutput, allowed_from_mask
+from trainer.common.distributions import EPSILON
+from trainer.common.policy import Policy, PolicyOutput, allowed_from_mask
 from trainer.sac.losses import squashed_log_prob
 
 _HALF_LOG_2PI = 0.5 * np.log(2 * np.pi)

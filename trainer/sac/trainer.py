@@ -7,7 +7,7 @@ One trainer per brain, with the PPOTrainer's interface for the run loop (``proce
 * a value network V(s) and its target copy (soft-updated with ``tau`` after every step);
 * twin Q networks Q1, Q2 (s, continuous actions) -> a value per discrete option (or one);
 * log entropy coefficients: one for the continuous block, one per discrete branch;
-* curiosity / rnd learners (trainer/ppo/reward_providers.py, shared with PPO), which reward
+* curiosity / rnd learners (trainer/common/reward_providers.py, shared with PPO), which reward
   each sampled minibatch afresh and learn on minibatches of their own, one per
   ``reward_signal_steps_per_update`` agent steps (as the reference does).
 
@@ -29,12 +29,14 @@ from torch import nn
 from protos.types import BehaviorSpec
 from trainer.config.support import SUPPORTED_REWARD_SIGNALS
 from trainer.errors import ConfigError
-from trainer.ppo import numpy_net
-from trainer.ppo.adam import Adam
-from trainer.ppo.buffer import Trajectory
-from trainer.ppo.networks import Critic, NetworkBody
-from trainer.ppo.reward_providers import Experience, load_providers, make_providers
-from trainer.ppo.schedules import LEARNING_RATE_FLOOR, decay
+from trainer.common import numpy_net
+from trainer.common.adam import Adam
+from trainer.common.encoders import VectorInput
+from trainer.common.networks import Critic, NetworkBody
+from trainer.common.reward_providers import Experience, load_providers, make_providers
+from trainer.common.schedules import LEARNING_RATE_FLOOR, decay
+from trainer.common.trainer_interface import Trainer
+from trainer.common.trajectory import Trajectory
 from trainer.ppo.trainer import PPOTrainer
 from trainer.sac import losses, numpy_step
 from trainer.sac.hyperparams import SACHyperparams
@@ -64,7 +66,8 @@ class EntropyCoefficients(nn.Module):
 def copy_normalization(source: NetworkBody, target: NetworkBody) -> None:
     """The target body's observation normalisers take the source's statistics."""
     for src, dst in zip(source.observation_encoder.encoders, target.observation_encoder.encoders):
-        if getattr(src, "normalizer", None) is not None and getattr(dst, "normalizer", None) is not None:
+        if (isinstance(src, VectorInput) and src.normalizer is not None
+                and isinstance(dst, VectorInput) and dst.normalizer is not None):
             for name, buffer in src.normalizer.named_buffers():
                 getattr(dst.normalizer, name).copy_(buffer)
 
@@ -77,9 +80,9 @@ def _next_obs_key(index: int) -> str:
     return f"next_obs_{index}"
 
 
-class SACTrainer:
+class SACTrainer(Trainer):
     def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: SACHyperparams,
-                 seed: int, device: str = "cpu"):
+                 seed: int, device: str = "cpu", use_numpy_update: bool = True):
         for name in hyperparams.reward_signals:
             if name not in SUPPORTED_REWARD_SIGNALS:
                 raise ConfigError(f"reward_signals.{name} is not supported yet for behavior "
@@ -134,8 +137,9 @@ class SACTrainer:
         self._numpy_critic = numpy_net.NumpyCritic(self.critic) if (
             numpy_net.supports(self.critic, recurrent=True) and self.device.type == "cpu") else None
         self.behavioral_cloning = None  # trainer/behavioral_cloning.py, set by behavior.make_trainer
-        # vector observations without memory on the CPU: gradient steps in numpy (numpy_step.py says why)
-        self._numpy_step = numpy_step.NumpySAC(self) if numpy_step.supports(self) else None
+        # vector observations without memory on the CPU: gradient steps in numpy (numpy_step.py says
+        # why); MLAGENTS_LIKE_NUMPY_UPDATE=0 (``use_numpy_update`` False) keeps autograd, as for PPO
+        self._numpy_step = numpy_step.NumpySAC(self) if use_numpy_update and numpy_step.supports(self) else None
 
     # the recurrent critic's value estimates run sequence by sequence as PPO's (one implementation)
     _value_estimates_by_sequence = PPOTrainer._value_estimates_by_sequence
@@ -467,6 +471,13 @@ class SACTrainer:
         self.step = 0
         self.update_steps = 1
         self.reward_signal_update_steps = 1
+
+    @property
+    def saves_replay_buffer(self) -> bool:
+        return self.hyperparams.save_replay_buffer
+
+    def replay_buffer_size(self) -> int:
+        return len(self.buffer)
 
     def save_replay_buffer(self, path: str) -> None:
         self.buffer.save(path)

@@ -1,5 +1,5 @@
-"""Procedural creatures (seed 002): parametric bipeds and quadrupeds, stochastic L-system creatures,
-and their MuJoCo models. Usable without the stub's protocol::
+"""Procedural creatures (the creature report: docs/stub-tasks.md, "Seed projects"): parametric bipeds
+and quadrupeds, stochastic L-system creatures, and their MuJoCo models. Usable without the stub's protocol::
 
     from unity_stub_env.creatures import generate, to_mjcf
     xml = to_mjcf(generate("quadruped", seed=7))

@@ -1,4 +1,5 @@
-r"""Stochastic bracketed L-system creatures drawn by a 3D turtle (seed 002's first generator).
+r"""Stochastic bracketed L-system creatures drawn by a 3D turtle (the creature report's first
+generator; docs/stub-tasks.md, "Seed projects").
 
 The grammar (``RULES``): one non-terminal per body part, each with weighted alternatives chosen
 by the seeded generator at every rewrite; ``STEPS`` parallel rewrites of the axiom, then any
@@ -25,11 +26,11 @@ shoulder (rigid), ``l`` leg, ``a`` arm, ``n`` neck, ``h`` head; the first ``l``/
 ``s``/``o`` is ``leg_upper``/``arm_upper``. Segment length = the category's base length
 (``LENGTHS``) times a uniform factor in [0.8, 1.2], radius = ``RADII`` of the category; each
 segment's factor is drawn when it is drawn, so left and right limbs generally differ, as in
-the thesis (these creatures are not symmetric).
+the report (these creatures are not symmetric).
 
-The bone tree is rebuilt from the segments' endpoints alone (the thesis' method): the root is
+The bone tree is rebuilt from the segments' endpoints alone (the report's method): the root is
 the first torso segment; any other segment's parent is the earliest segment whose distal point
-equals its proximal point (within 1e-9 m). The thesis assumes such a segment always exists; the
+equals its proximal point (within 1e-9 m). The report assumes such a segment always exists; the
 branches leaving the torso's front end (neck, arms) start where no segment ends, and are attached
 to the root at its proximal point. The bones are then ordered breadth-first from the root. Bone frames: proximal axis along the segment, ventral axis = the turtle's
 down vector while drawing; joint limits by category as in ``skeleton.py``.

@@ -1,11 +1,12 @@
-"""Parametric bipeds and quadrupeds (seed 002's generator, after Hudson's model).
+"""Parametric bipeds and quadrupeds (the creature report's generator, after Hudson's
+model; docs/stub-tasks.md, "Seed projects").
 
 Every length and girth is drawn uniformly between the per-part bounds of ``BIPED`` / ``QUADRUPED``
 (metres; a girth is a circumference, the capsule radius is girth / 2 pi) from one
 ``numpy.random.Generator(PCG64(seed))``, in a fixed order, so a seed always gives the same
 creature (with this version of the module). Frames and limits: ``skeleton.py``.
 
-Construction, in the thesis' order:
+Construction, in the report's order:
   * **torso**: a total length, split into 3 bones at uniform fractions (each bone's share drawn in
     [0.5, 1.5] and normalised), each bone with its own girth; upright for bipeds, along +x for
     quadrupeds; the lowest (biped) / rearmost (quadruped) torso bone is the root.
@@ -25,7 +26,7 @@ Construction, in the thesis' order:
     The turns are about the lateral axis (in the mid-plane): a turn about any other axis would
     break the creature's left/right symmetry. **head**: one bone extending the last neck bone.
   * A quadruped's front and rear legs may differ in length: the torso is pitched so that all four
-    feet end at the same height with the legs still vertical (the thesis' final rotation).
+    feet end at the same height with the legs still vertical (the report's final rotation).
 Finally the creature is lifted so that its lowest point is 5 mm above z = 0.
 """
 from __future__ import annotations

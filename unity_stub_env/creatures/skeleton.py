@@ -3,11 +3,12 @@
 World frame of a generated creature: z up, the creature faces +x, +y is its left. Lengths in
 metres, angles in degrees.
 
-Bone frame (the thesis' convention): the **proximal point** is where the bone is attached to its
-parent (the end nearest the body's centre), the **distal point** its other end; the **proximal
-axis** runs from the proximal to the distal point; the **ventral axis** is orthogonal to it and
-points to the bone's front (for arms: towards the body; for a horizontal torso: down; otherwise:
-where the creature looks); the **lateral axis** = proximal x ventral completes a right-handed frame.
+Bone frame (the convention of the creature report, docs/stub-tasks.md, "Seed projects"): the **proximal
+point** is where the bone is attached to its parent (the end nearest the body's centre), the **distal
+point** its other end; the **proximal axis** runs from the proximal to the distal point; the **ventral
+axis** is orthogonal to it and points to the bone's front (for arms: towards the body; for a horizontal
+torso: down; otherwise: where the creature looks); the **lateral axis** = proximal x ventral completes a
+right-handed frame.
 A bone's joint sits at its proximal point and rotates it relative to its parent about these axes.
 
 Joint limits by category (``LIMITS``; degrees, (min, max) per axis; an axis not listed is locked).
@@ -34,7 +35,7 @@ own; a MuJoCo ``ball`` joint can only limit one cone angle, so it cannot express
 
 Mirrored bones (the left member of a symmetric pair, ``side == +1``) are the reflection of their
 right partner through the plane y = 0; their joint axes are the reflected axes times -1 (as the
-thesis does for Unity), so one table entry moves both limbs mirror-symmetrically. Bones on the
+report does for Unity), so one table entry moves both limbs mirror-symmetrically. Bones on the
 mid-plane have ``side == 0``, right bones ``side == -1``.
 """
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""``creature``: a generated creature learns to walk to targets over generated terrain (seed 002).
+"""``creature``: a generated creature learns to walk to targets over generated terrain (the creature
+report: docs/stub-tasks.md, "Seed projects").
 
 One agent per area. Each area is an arena: a 20 m x 20 m heightfield (flat, or Perlin noise whose
 height is set by the roughness), four walls 1 m high, optional box obstacles, and a target; the
@@ -189,7 +190,7 @@ class CreatureTask(Task):
     max_step = MAX_STEP
     decision_period = 1
     sets_reward = False
-    description = ("Generated creature walking to targets over generated terrain (seed 002). Shapes shown for "
+    description = ("Generated creature walking to targets over generated terrain (docs/stub-tasks.md). Shapes shown for "
                    "the default quadruped (creature_kind 0, creature_seed 0); they follow the creature. "
                    "Reward: Walker's match-speed x look-at-target. Env params: creature_kind, creature_seed, "
                    "terrain_roughness, obstacles, target_speed.")

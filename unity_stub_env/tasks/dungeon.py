@@ -57,8 +57,7 @@ the door, the others stand still) escapes in each of 20 seeded episodes, in 12 t
 return 1 + steps * time_penalty); a still group is interrupted at 100 steps with return
 100 * time_penalty (0 by default); uniformly random actions escape in 21 % of the episodes (the
 dragon eats somebody in almost every one).
-Trained (bench/RESULTS.md, 2026-11-27, 100k steps): MA-POCA escapes in 0.99-1.00 of the episodes
-(5 of 5 seeds), independent PPO in 0.00-0.22, its groups avoiding the dragon.
+What MA-POCA and independent PPO learn on it: docs/poca.md and bench/RESULTS.md.
 """
 from __future__ import annotations
 

@@ -5,10 +5,11 @@ Run by hand after changing the scenario: ``python tests/protocol/golden/build_tr
 
 The requests are what Unity's C# ``RpcCommunicator`` (com.unity.ml-agents 3.0, communication
 API 1.5.0) sends for a scene with two Basic agents; the responses are what a trainer speaking
-API 1.5.0 / package 1.1.0 must answer (docs/protocol.md §1.5, docs/protocol.md §3.4, docs/protocol.md §4). Every byte is written down from
+API 1.5.0 / package 1.1.0 must answer (docs/protocol.md, "Handshake, message by message", "Trainer → simulator" and "Side
+channels"). Every byte is written down from
 the protobuf wire format with ``protowire`` — no generated message classes are used here.
 
-Field numbers used (docs/protocol.md §2):
+Field numbers used (docs/protocol.md, "Message schema"):
   UnityMessageProto      1 header, 2 unity_output, 3 unity_input
   HeaderProto            1 status
   UnityOutputProto       1 rl_output, 2 rl_initialization_output
@@ -54,14 +55,14 @@ ENGINE_SETTINGS = dict(width=84, height=84, quality_level=5, time_scale=20.0,
 STEP_ACTIONS = ([[2], [1]], [[0], [2]])  # discrete actions answering M3 and M4, one row per deciding agent
 
 
-# ------------------------------------------------------------------ side channel bytes (docs/protocol.md §4.1)
+# ------------------------------------------------------------------ side channel bytes (docs/protocol.md, "Framing")
 def side_channel_message(channel: uuid.UUID, payload: bytes) -> bytes:
     """16-byte .NET-order GUID, int32 LE length, payload."""
     return channel.bytes_le + struct.pack("<i", len(payload)) + payload
 
 
 def engine_config_side_channel() -> bytes:
-    """Five engine-config messages, types 0..4 (docs/protocol.md §4.2)."""
+    """Five engine-config messages, types 0..4 (docs/protocol.md, "Known channels")."""
     s = ENGINE_SETTINGS
     payloads = [
         struct.pack("<iii", 0, s["width"], s["height"]),

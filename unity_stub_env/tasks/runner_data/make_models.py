@@ -8,7 +8,8 @@ then trained exactly as ``unity-stub-env hmm train CORPUS -o MODEL --states N --
 --method fast --seed 0`` would, and tests/stub/test_stub_runner.py checks that the shipped models
 are what this script produces.
 
-Platform corpora (labels Left, Right, Straight; 5 states each, as in the thesis):
+Platform corpora (labels Left, Right, Straight; 5 states each, as in the runner
+thesis, docs/stub-tasks.md, "Seed projects"):
   urban  - city blocks: a few straights, then one right-angle turn; never two turns in a row.
   rural  - a winding road: S-bends (a turn one way, maybe a straight, the other way back).
   desert - long straights with a rare single turn.

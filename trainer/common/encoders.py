@@ -10,8 +10,8 @@ from torch import nn
 
 from trainer.config.settings import ENCODER_MIN_SIZE
 from trainer.errors import ConfigError
-from trainer.ppo.layers import KAIMING_NORMAL, Swish, linear_layer
-from trainer.ppo.normalizer import Normalizer
+from trainer.common.layers import KAIMING_NORMAL, Swish, linear_layer
+from trainer.common.normalizer import Normalizer
 
 RELU_GAIN = 1.41
 

@@ -43,3 +43,16 @@ def categorical_log_prob(probs: torch.Tensor, actions: torch.Tensor) -> torch.Te
 def categorical_entropy(probs: torch.Tensor) -> torch.Tensor:
     """-sum_k p log(p + EPSILON). probs [n, k] -> [n]."""
     return -torch.sum(probs * torch.log(probs + EPSILON), dim=1)
+
+
+def combined_entropy(continuous_entropy: torch.Tensor | None, discrete_entropies: list[torch.Tensor]
+                     ) -> torch.Tensor:
+    """Policy entropy per agent: mean over Gaussian dims [n, c] plus the sum of branch entropies ([n] each)."""
+    total: torch.Tensor | None = None
+    if continuous_entropy is not None:
+        total = continuous_entropy.mean(dim=1)
+    for branch_entropy in discrete_entropies:
+        total = branch_entropy if total is None else total + branch_entropy
+    if total is None:
+        raise ValueError("a policy needs at least one continuous dimension or discrete branch")
+    return total

@@ -5,7 +5,7 @@ learns from a minibatch (``update``, its own Adam) and has a value head of its o
 critic. PPO and SAC share them: PPO rewards each trajectory once and updates on every PPO
 minibatch; SAC rewards every sampled replay minibatch afresh and updates on minibatches of
 their own (docs/sac.md). ``hyperparams`` is either room's dataclass (the network fields are
-named alike). Behaviour as in ML-Agents Release 22 (docs/ppo.md §10):
+named alike). Behaviour as in ML-Agents Release 22 (docs/ppo.md, "PPO details that affect results"):
 
 * Both ignore ``done``: their returns are always bootstrapped with V(next obs).
 * Curiosity: a state encoder phi (a network body with the signal's network_settings), an inverse
@@ -28,17 +28,18 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import Any, Sequence
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar, Sequence
 
 import numpy as np
 import torch
 from torch import nn
 
-from trainer.ppo.adam import Adam
+from trainer.common.adam import Adam
 from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
-from trainer.ppo.layers import KAIMING_NORMAL, Swish, linear_layer
-from trainer.ppo.losses import masked_mean
-from trainer.ppo.networks import NetworkBody
+from trainer.common.layers import KAIMING_NORMAL, Swish, linear_layer
+from trainer.common.masked import masked_mean
+from trainer.common.networks import NetworkBody
 from protos.types import ActionSpec, BehaviorSpec
 
 logger = logging.getLogger("mlagents_like")
@@ -133,7 +134,36 @@ class CuriosityNetwork(nn.Module):
         return loss
 
 
-class CuriosityProvider:
+class RewardProvider(ABC):
+    """What PPO, POCA and SAC ask of an intrinsic reward signal (curiosity, rnd, gail)."""
+
+    stat_name: ClassVar[str]  # <Name> of its statistics (Policy/<Name> Reward, ...)
+    ignore_done: ClassVar[bool]  # True: its returns bootstrap through the end of an episode
+    needs_next_obs: ClassVar[bool]  # its Experience carries the next observations
+    needs_done: bool = False  # its Experience carries the done flags (gail with use_actions)
+    strength: float
+    optimizer: Adam  # its own learner's
+
+    @abstractmethod
+    def evaluate(self, exp: Experience) -> np.ndarray:
+        """float32 [n]: the reward of each experience, before ``strength``."""
+
+    @abstractmethod
+    def update(self, exp: Experience) -> dict[str, float]:
+        """One step of its learner on a minibatch; its loss statistics."""
+
+    @abstractmethod
+    def modules(self) -> list[nn.Module]:
+        """Its networks (whose observation normalisers the data-parallel ranks keep in step)."""
+
+    @abstractmethod
+    def state_dict(self) -> dict[str, Any]: ...
+
+    @abstractmethod
+    def load_state_dict(self, state: dict[str, Any]) -> None: ...
+
+
+class CuriosityProvider(RewardProvider):
     stat_name = "Curiosity"
     ignore_done = True  # returns bootstrap through the end of an episode
     needs_next_obs = True
@@ -163,6 +193,9 @@ class CuriosityProvider:
         self.optimizer.step()
         return {"Losses/Curiosity Forward Loss": forward.item(), "Losses/Curiosity Inverse Loss": inverse.item()}
 
+    def modules(self) -> list[nn.Module]:
+        return [self.network]
+
     def state_dict(self) -> dict[str, Any]:
         return {"Module:Curiosity": self.network.state_dict(),
                 "Optimizer:Curiosity": {**self.optimizer.state_dict(),
@@ -175,7 +208,7 @@ class CuriosityProvider:
         self.optimizer.load_state_dict(optimizer)
 
 
-class RNDProvider:
+class RNDProvider(RewardProvider):
     stat_name = "Rnd"  # the reference capitalises its class name "RND"
     ignore_done = True
     needs_next_obs = False
@@ -210,6 +243,9 @@ class RNDProvider:
         self.optimizer.step()
         return {"Losses/RND Loss": loss.item()}
 
+    def modules(self) -> list[nn.Module]:
+        return [self.target, self.predictor]
+
     def state_dict(self) -> dict[str, Any]:
         return {"Module:RND-pred": self.predictor.state_dict(), "Module:RND-target": self.target.state_dict(),
                 "Optimizer:RND": self.optimizer.state_dict()}
@@ -226,7 +262,7 @@ GAIL_GRADIENT_PENALTY = 10.0
 GAIL_VAIL_ALPHA = 0.0005  # VAIL's beta step
 GAIL_MUTUAL_INFORMATION = 0.5  # VAIL's information constraint I_c
 GAIL_EPSILON = 1e-7
-CONTINUOUS_CLIP = 3.0  # PPO's env actions: clamp(a, -3, 3) / 3 (trainer/ppo/policy.py)
+CONTINUOUS_CLIP = 3.0  # PPO's env actions: clamp(a, -3, 3) / 3 (trainer/common/policy.py)
 
 
 class DiscriminatorNetwork(nn.Module):
@@ -272,7 +308,7 @@ class DiscriminatorNetwork(nn.Module):
         return self.estimator(hidden).squeeze(1), z_mu
 
 
-class GAILProvider:
+class GAILProvider(RewardProvider):
     """Generative adversarial imitation: a discriminator learns to tell the policy's steps from a
     demonstration's, and the policy is rewarded for steps it takes for the demonstration's.
     Behaviour as in ML-Agents Release 22 (docs/demonstrations.md):
@@ -384,6 +420,9 @@ class GAILProvider:
         norm = torch.sqrt(torch.sum(gradient.reshape(len(gradient), -1) ** 2, dim=1) + GAIL_EPSILON)
         return torch.mean((norm - 1.0) ** 2)
 
+    def modules(self) -> list[nn.Module]:
+        return [self.network]
+
     def state_dict(self) -> dict[str, Any]:
         return {"Module:GAIL": self.network.state_dict(),
                 "Optimizer:GAIL": {**self.optimizer.state_dict(), "generator": self.generator.get_state()}}
@@ -400,7 +439,7 @@ class GAILProvider:
 PROVIDERS = {"curiosity": CuriosityProvider, "rnd": RNDProvider, "gail": GAILProvider}
 
 
-def make_providers(spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int) -> dict[str, Any]:
+def make_providers(spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int) -> dict[str, RewardProvider]:
     """One provider per intrinsic reward signal of ``hyperparams``, each initialised from its own
     seed (``seed`` + its position), in the order of the YAML."""
     providers = {}
@@ -413,7 +452,7 @@ def make_providers(spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int) -
     return providers
 
 
-def load_providers(providers: dict[str, Any], state: dict) -> None:
+def load_providers(providers: dict[str, RewardProvider], state: dict) -> None:
     """Restore each provider from a checkpoint (PPO, POCA and SAC alike); one the checkpoint lacks
     (a signal added since) starts untrained, with one warning."""
     for name, provider in providers.items():

@@ -12,8 +12,8 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 
-from trainer.ppo import numpy_net
-from trainer.ppo.distributions import (
+from trainer.common import numpy_net
+from trainer.common.distributions import (
     EPSILON,
     categorical_entropy,
     categorical_log_prob,
@@ -21,8 +21,8 @@ from trainer.ppo.distributions import (
     gaussian_log_prob,
 )
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.losses import combined_entropy
-from trainer.ppo.networks import Actor
+from trainer.common.distributions import combined_entropy
+from trainer.common.networks import Actor
 from protos.types import ActionTuple, BehaviorSpec
 
 CONTINUOUS_CLIP = 3.0

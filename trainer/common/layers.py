@@ -6,8 +6,9 @@ whole kernel by a ``gain``; biases start at zero.
 
 The kernel W [out, in] is stored input-major: W^T is the contiguous array. numpy_net.py reads the
 layers through numpy views of their storage, and OpenBLAS multiplies a small batch by a
-contiguous W^T up to 3x faster than by a transposed view (12 x 128 by 128 x 128: 4.5 us against
-13 us, measured 2026-11-25); torch's Linear and its checkpoints do not care about the layout.
+contiguous W^T up to 3x faster than by a transposed view (docs/performance.md, "One network, run
+in numpy on views of the torch parameters"); torch's Linear and its checkpoints do not care about
+the layout.
 """
 from __future__ import annotations
 

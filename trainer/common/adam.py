@@ -15,17 +15,11 @@ parameter) or from the hand-written backward of numpy_update.py (``Stretch.step`
 laid out as their parameters, for a contiguous run of the parameters, e.g. the critic's alone).
 ``state_dict`` has torch.optim.Adam's layout, so checkpoints load into torch.optim.Adam and back.
 
-Why not torch.optim.Adam (measured 2026-11-25, 2 vCPUs, 1 BLAS/torch thread, other jobs running;
-/tmp micro-benchmark, min of 5 x 500 steps, gradients handed over as zero-copy tensors):
-
-    parameters                      torch.optim.Adam (foreach / for-loop)   this class
-    basic actor   20-20-3, 483      208 / 198 us per step                    21 us
-    ball3d actor  8-128-128-2, 17.9k 190 / 190 us                            63 us
-    ball3d critic 8-128-128-1, 17.8k 180 / 181 us                            50 us
-
-A ball3d update takes 562 minibatch steps of each network (~0.33 s in numpy in all): torch's
-optimiser would add ~0.15 s (+45 %); basic's 24 steps (~5 ms per update) would more than double.
-Constructing the first torch.optim optimizer also imports torch._dynamo: +1.5 s at every start.
+Why not torch.optim.Adam: for networks this small its per-step overhead is several times this
+class's whole step, and an update takes hundreds of minibatch steps per network, so it would add
+about half again to a ball3d update and more than double a basic one; constructing the first
+torch.optim optimizer also imports torch._dynamo, seconds at every start. The measurements:
+docs/performance.md, "The PPO update in numpy and on two CPUs".
 tests/unit/test_ppo_adam.py compares this class with torch.optim.Adam step by step.
 """
 from __future__ import annotations

@@ -18,10 +18,10 @@ import torch
 from torch import nn
 
 from trainer.errors import ConfigError
-from trainer.ppo.distributions import mask_logits
-from trainer.ppo.encoders import VectorInput, make_visual_encoder
+from trainer.common.distributions import mask_logits
+from trainer.common.encoders import VectorInput, make_visual_encoder
 from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.ppo.layers import KAIMING_NORMAL, XAVIER_UNIFORM, hidden_layers, linear_layer
+from trainer.common.layers import KAIMING_NORMAL, XAVIER_UNIFORM, hidden_layers, linear_layer
 from protos.types import ActionSpec, ObservationSpec
 
 MODEL_EXPORT_VERSION = 3

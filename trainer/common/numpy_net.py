@@ -32,9 +32,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from trainer.ppo.distributions import EPSILON
-from trainer.ppo.encoders import VectorInput
-from trainer.ppo.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN, Actor, Critic, NetworkBody
+from trainer.common.distributions import EPSILON
+from trainer.common.encoders import VectorInput
+from trainer.common.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN, Actor, Critic, NetworkBody
 
 
 def supports(module: Actor | Critic, recurrent: bool = False) -> bool:
