@@ -334,7 +334,7 @@ def main(argv: list[str] | None = None) -> int:
     # script compiles our editable tree (again here, in case it changed since). A git worktree
     # that shares another tree's venv must not re-point its editable install: it only compiles
     # its own tree, and "ours" runs that tree (PYTHONPATH).
-    installed = subprocess.run([str(OUR_PYTHON), "-c", "import trainer; print(trainer.__file__)"], env=env,
+    installed = subprocess.run([str(OUR_PYTHON), "-I", "-c", "import trainer; print(trainer.__file__)"], env=env,
                                capture_output=True, text=True).stdout.strip()
     if installed and Path(installed).resolve().parents[1] == REPO.resolve():
         subprocess.run([str(REPO / "scripts" / "ensure_venv.sh")], check=True)

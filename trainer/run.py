@@ -30,12 +30,14 @@ from protos.types import ActionTuple, DecisionSteps, StatsAggregationMethod, Ste
 from trainer import crash_points
 from trainer.artifacts.atomic import WRITE_ERRNOS, results_write_error
 from trainer.artifacts.behaviors import BehaviorRecorder
+from trainer.artifacts.clips import ClipRecorder
 from trainer.artifacts.console import ConsoleWriter, ProgressLine
 from trainer.artifacts.stats import PROPERTY_HYPERPARAMETERS, PROPERTY_SELF_PLAY, GaugeWriter, StatsReporter
 from trainer.artifacts.tensorboard import TensorboardWriter
 from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import TrainingStatus
 from trainer.config.env_vars import EnvVars
+from trainer.config.legacy import log_agent_steps
 from trainer.config.loader import write_run_options
 from trainer.config.settings import settings_as_dict
 from trainer.config.support import goal_conditioning_note
@@ -101,11 +103,14 @@ class RunState:
     trackers: dict[tuple[int, str], AgentTracker] = field(default_factory=dict)
     pending_reset: bool = False
     teams: TeamController = field(default_factory=TeamController)  # self-play's learning team
+    clips: ClipRecorder | None = None  # --record-video (trainer/artifacts/clips.py)
     start_time: float = field(default_factory=time.time)
     _last_progress: float = float("-inf")
 
     # ------------------------------------------------------------------ behaviors
-    def ensure_runner(self, behavior_name: str) -> BehaviorRunner:
+    def ensure_runner(self, behavior_name: str, agents: int | None = None) -> BehaviorRunner:
+        """The behavior's runner, created at its first contact; ``agents`` (its agents in one
+        simulator, then) converts a 0.x file's step counts (RunOptions.behavior_settings)."""
         brain, _team = brain_name_of(behavior_name)
         runner = self.runners.get(brain)
         if runner is not None:
@@ -115,7 +120,9 @@ class RunState:
 
         opts = self.options
         logger.info("Connected new brain: %s", behavior_name)
-        settings = opts.behavior_settings(brain)
+        settings = opts.behavior_settings(brain, agents)
+        if opts.legacy_env_steps and agents is not None:
+            log_agent_steps(brain, agents, opts.behavior_settings(brain), settings)
         if settings.threaded:
             logger.warning("%s: threaded: true is accepted but has no effect here; updates run between "
                            "environment steps, as with threaded: false (same results, no policy lag).",
@@ -143,6 +150,8 @@ class RunState:
             # what a run killed without warning wrote after its last checkpoint is void
             self.reporter.resume_from(brain, runner.next_summary - 1)
         self.runners[brain] = runner
+        if self.clips is not None and runner.training:
+            runner.on_checkpoint = self.clips.after_checkpoint
         self.reporter.add_property(brain, PROPERTY_HYPERPARAMETERS, settings_as_dict(settings))
         if runner.self_play is not None:
             self.reporter.add_property(brain, PROPERTY_SELF_PLAY, True)
@@ -162,7 +171,8 @@ class RunState:
             for behavior in res.steps:
                 by_behavior.setdefault(behavior, []).append(env_id)
         for behavior, env_ids in by_behavior.items():
-            runner = self.ensure_runner(behavior)
+            first = results[env_ids[0]].steps[behavior]
+            runner = self.ensure_runner(behavior, len(np.union1d(first[0].agent_id, first[1].agent_id)))
             policy = runner.policy_for(brain_name_of(behavior)[1])  # self-play: maybe a snapshot
             # each env's deciding agents are the rows [start, end) of the one batched forward pass
             steps, start = [], 0
@@ -418,6 +428,8 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
     reporter = StatsReporter(writers)
     state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
                      make_routers(env.num_envs), env_vars, behavior_recorder(options))
+    if ck.record_video and main:
+        state.clips = ClipRecorder.for_env(env.env_path, env.seed)
     for line in params.describe():
         logger.info(line)
     stopped = write_failed = False
@@ -495,6 +507,8 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         finally:
             pool.close()
             state.ranks.close()
+            if state.clips is not None:
+                state.clips.finish()
     if stopped and not ck.inference and not state.finished:
         logger.info("Stopped before max_steps (exit status %d); continue this run with --resume.", EXIT_STOPPED)
         return EXIT_STOPPED

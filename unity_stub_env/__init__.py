@@ -8,8 +8,15 @@ before launching the stub.
 This module is the stub's public API for other packages (the trainer uses nothing else):
 ``TASK_NAMES``, ``MIRROR_TASK``, ``spin_wait_args``, ``transport_args`` and ``write_player_launcher`` (cheap), ``TASKS`` and
 ``make_task`` (loaded on first use), and the HMM tools the trainer's ``hmm`` sampler uses: ``Hmm``,
-``HmmError``, ``parse_corpus``, ``train_hmm`` (``unity_stub_env.hmm``, loaded on first use)."""
+``HmmError``, ``parse_corpus``, ``train_hmm`` (``unity_stub_env.hmm``, loaded on first use).
+
+On a Linux machine without a display, importing the package sets ``MUJOCO_GL=egl`` unless it is
+set (``unity_stub_env.render.gl``): MuJoCo reads it once, and its default (GLFW) needs a display."""
 from __future__ import annotations
+
+from unity_stub_env.render.gl import headless_default
+
+headless_default()  # before anything imports MuJoCo: it reads MUJOCO_GL once, at import
 
 from unity_stub_env.launcher import spin_wait_args, transport_args, write_player_launcher
 from unity_stub_env.task_names import MIRROR_TASK, TASK_NAMES

@@ -183,6 +183,23 @@ class Academy:
     def _end_episodes(self, done: np.ndarray, interrupted: np.ndarray) -> None:
         """Queue the terminal infos of ``done`` [n] agents, then start their next episode."""
         task = self.task
+        self._queue_terminal_infos(done, interrupted)
+        finished = int(done.sum())
+        self.completed_episodes += finished
+        if self.completed_episodes // 100 != (self.completed_episodes - finished) // 100:
+            logger.info("%d episodes completed", self.completed_episodes)
+        self.pending_reward[done] = 0.0
+        self.pending_group_reward[done] = 0.0
+        task.reset(done)
+        self.episode_ids[done] = self.episode_counter.take(finished)
+        self.continuous[done] = 0.0
+        self.discrete[done] = 0
+
+    def _queue_terminal_infos(self, done: np.ndarray, interrupted: np.ndarray) -> None:
+        """What the trainer will learn of the ``done`` [n] agents' last step (observations, the
+        reward pending, ``interrupted``), read before they are reset: here the terminal infos of
+        the next message; the in-process envs (``unity_stub_env.gym``) keep the arrays instead."""
+        task = self.task
         if len(self.behaviors) == 1:
             observations = [obs[done] for obs in task.observe()]
             groups = task.group_ids()
@@ -194,16 +211,6 @@ class Academy:
             )
         else:
             self._queue_done_by_behavior(done, interrupted)
-        finished = int(done.sum())
-        self.completed_episodes += finished
-        if self.completed_episodes // 100 != (self.completed_episodes - finished) // 100:
-            logger.info("%d episodes completed", self.completed_episodes)
-        self.pending_reward[done] = 0.0
-        self.pending_group_reward[done] = 0.0
-        task.reset(done)
-        self.episode_ids[done] = self.episode_counter.take(finished)
-        self.continuous[done] = 0.0
-        self.discrete[done] = 0
 
     def _queue_done_by_behavior(self, done: np.ndarray, interrupted: np.ndarray) -> None:
         """``_end_episodes``' terminal infos for a task with several behaviors, each to its own list."""

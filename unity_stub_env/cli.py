@@ -1,12 +1,14 @@
 """``unity-stub-env``: run a stub task as if it were a Unity player built with ML-Agents.
 
     unity-stub-env --task NAME --mlagents-port P [-nographics] [-batchmode] [-logFile F]
-                   [--num-areas N] [--seed S] [--decision-period K] [--connect-timeout T]
-                   [--spin-wait-ms MS] [--transport {http2,grpcio}]
+                   [--num-areas N] [--agents-per-area N] [--seed S] [--decision-period K]
+                   [--connect-timeout T] [--spin-wait-ms MS] [--transport {http2,grpcio}]
     unity-stub-env --task mirror --spec behaviors.json --mlagents-port P    (or --task mirror=FILE)
     unity-stub-env --list
     unity-stub-env --task dodge|mimic --evaluate MODEL.onnx|zero|random|scripted [--episodes N] [--seed S] [--json F]
-                   [--evaluate-option KEY=VALUE]
+                   [--evaluate-option KEY=VALUE] [--video DIR]  (one clip per scripted case)
+    unity-stub-env --task T --play MODEL.onnx|zero|random|scripted --video FILE.mp4|FILE.gif [--seconds S |
+                   --episodes N] [--width W --height H --fps F --seed S --env-param K=V --agent K --stochastic]
     unity-stub-env --task basic|ball3d|... --record-demo OUT.demo --policy MODEL.onnx|scripted
                    [--demo-steps N] [--seed S] [--num-areas N] [--env-param KEY=NUMBER] [--demo-noise S]  (see unity_stub_env.record_demo)
     unity-stub-env hmm train CORPUS -o MODEL [--states N --restarts R --method fast|baum-welch --seed S]
@@ -17,7 +19,8 @@ Unity flags the stub does not know are ignored, as a player ignores them. Exit c
 0 the trainer (status 400 / QUIT / gone) or a signal ended the run; 1 no trainer within
 --connect-timeout, an incompatible trainer or a protocol error; 2 bad command line.
 
-The stub reads no environment variable: mlagents-like-learn passes its choices as flags.
+The stub reads no environment variable of its own (mlagents-like-learn passes its choices as flags);
+MuJoCo's renderer reads MUJOCO_GL (unity_stub_env.render.gl).
 """
 from __future__ import annotations
 
@@ -55,6 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--mlagents-port", type=int, default=None,
                         help="port of the trainer's gRPC server (a Unity player does not train without it)")
     parser.add_argument("--num-areas", type=int, default=None, help="override the trainer's num_areas")
+    parser.add_argument("--agents-per-area", type=int, default=None, metavar="N",
+                        help="agents in one area, for tasks whose agents are independent copies (ball3d, "
+                             "dodge, ...): 1 makes a one-agent scene, as single-agent wrappers such as "
+                             "UnityToGymWrapper need (default: the task's)")
     parser.add_argument("--seed", type=int, default=None, help="override the trainer's seed")
     parser.add_argument("--decision-period", type=int, default=None,
                         help="control steps between decisions (default: the task's)")
@@ -74,12 +81,35 @@ def build_parser() -> argparse.ArgumentParser:
                              "expert); repeatable")
     parser.add_argument("--episodes", type=int, default=None,
                         help="--evaluate: dodge: random throws after the scripted ones (default 500); "
-                             "mimic: trials per motion and push (default 32)")
+                             "mimic: trials per motion and push (default 32); --play: film until the "
+                             "followed agent has finished N episodes")
     parser.add_argument("--json", dest="json_path", default=None, metavar="FILE",
                         help="--evaluate: also write the results as JSON to FILE")
     parser.add_argument("--evaluate-option", dest="evaluate_options", action="append", default=[],
                         metavar="KEY=VALUE", help="--evaluate: a task option for every policy, e.g. mimic's "
                                                   "residual=0.25 for a policy trained with that residual; repeatable")
+    parser.add_argument("--play", metavar="POLICY", default=None,
+                        help="play --task in-process (no trainer) with POLICY: a trained .onnx (deterministic "
+                             "actions unless --stochastic), 'zero', 'random' or 'scripted' (basic, ball3d, mimic), "
+                             "and film it to --video FILE (unity_stub_env.render.play)")
+    parser.add_argument("--video", metavar="FILE|DIR", default=None,
+                        help="--play: the clip to write, .mp4 (H.264) or .gif by its extension; "
+                             "--evaluate: a folder for one clip per scripted case")
+    parser.add_argument("--seconds", type=float, default=None,
+                        help="--play: simulated seconds to film (default 10, or until --episodes)")
+    parser.add_argument("--width", type=int, default=640, help="--play: frame width in pixels (default 640)")
+    parser.add_argument("--height", type=int, default=480, help="--play: frame height in pixels (default 480)")
+    parser.add_argument("--fps", type=float, default=30.0, help="--play: frames per simulated second (default 30)")
+    parser.add_argument("--agent", type=int, default=0, metavar="K",
+                        help="--play: the agent of the area the camera follows (default 0)")
+    parser.add_argument("--stochastic", action="store_true",
+                        help="--play MODEL.onnx: sample the actions instead of taking the deterministic ones")
+    parser.add_argument("--antialias", type=int, default=4, metavar="SAMPLES",
+                        help="--play: multisampling of MuJoCo's renderer (default 4; 0 draws ~3x faster on a CPU)")
+    parser.add_argument("--tensorboard", metavar="DIR", default=None,
+                        help="--play: also write the clip to DIR as a TensorBoard animated image (GIF) summary")
+    parser.add_argument("--tensorboard-tag", default="clip", help="--tensorboard: the image's tag (default clip)")
+    parser.add_argument("--tensorboard-step", type=int, default=0, help="--tensorboard: the summary's step")
     parser.add_argument("--record-demo", metavar="OUT.demo", default=None,
                         help="record a demonstration of --task in Unity's .demo format (no trainer) with "
                              "--policy, for behavioral_cloning and GAIL")
@@ -87,8 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="--record-demo: a trained .onnx (deterministic actions) or 'scripted' (the "
                              "task's hand-written expert: basic, ball3d, mimic)")
     parser.add_argument("--env-param", dest="env_params", action="append", default=[], metavar="KEY=NUMBER",
-                        help="--record-demo: an environment parameter the task reads, e.g. mimic's motion=2; "
-                             "repeatable")
+                        help="--record-demo, --play: an environment parameter the task reads, e.g. mimic's "
+                             "motion=2; repeatable")
     parser.add_argument("--demo-noise", type=float, default=0.0, metavar="SIGMA",
                         help="--record-demo: act with Gaussian noise of std SIGMA on the continuous actions "
                              "while recording the policy's own (DART; default 0)")
@@ -164,9 +194,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unity-stub-env: each --task may appear once (got {', '.join(args.tasks)}): two copies "
               "would share one behavior name; use --num-areas for more agents.", file=sys.stderr)
         return 2
+    if args.agents_per_area is not None:
+        fixed = [name for name in args.tasks if name == MIRROR_TASK or TASKS[name].agents_interact]
+        if fixed or args.agents_per_area < 1:
+            print(f"unity-stub-env: --agents-per-area must be 1 or more and applies to tasks whose agents are "
+                  f"independent; {', '.join(fixed) or args.agents_per_area} cannot take it (use --num-areas).",
+                  file=sys.stderr)
+            return 2
     if not args.spin_wait_ms >= 0:
         print(f"unity-stub-env: --spin-wait-ms must be 0 or more, got {args.spin_wait_ms:g}.", file=sys.stderr)
         return 2
+    if args.play is not None:
+        if len(args.tasks) != 1 or args.mirror is not None or args.video is None:
+            print("unity-stub-env: --play takes exactly one --task and --video FILE.mp4|FILE.gif.", file=sys.stderr)
+            return 2
+        from unity_stub_env.render.play import run as run_play
+
+        return run_play(args)
     if args.evaluate:
         if len(args.tasks) != 1 or args.mirror is not None:
             print("unity-stub-env: --evaluate takes exactly one --task.", file=sys.stderr)
@@ -174,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
         from unity_stub_env.evaluate import run as run_evaluation
 
         return run_evaluation(args.tasks[0], args.evaluate, args.seed or 0, args.episodes, args.json_path,
-                              args.evaluate_options)
+                              args.evaluate_options, args.video)
     if args.record_demo is not None:
         if len(args.tasks) != 1 or args.mirror is not None or args.policy is None:
             print("unity-stub-env: --record-demo takes exactly one --task and --policy MODEL.onnx|scripted.",
@@ -186,8 +230,9 @@ def main(argv: list[str] | None = None) -> int:
                              args.num_areas, args.env_params, args.demo_noise)
     if args.write_launcher is not None:
         spec = ["--spec", os.path.abspath(args.spec)] if args.mirror is not None else []
+        agents = ["--agents-per-area", str(args.agents_per_area)] if args.agents_per_area is not None else []
         path = write_player_launcher(args.write_launcher, args.tasks, extra_args=spin_wait_args(
-            args.spin_wait_ms / 1e3) + transport_args(args.transport) + spec)
+            args.spin_wait_ms / 1e3) + transport_args(args.transport) + spec + agents)
         print(f"{path}  (use --env {path.with_suffix('')})")
         return 0
     if args.mlagents_port is None:
@@ -251,7 +296,8 @@ def run_session(communicator: RpcCommunicator, args: argparse.Namespace) -> None
 
             tasks += mirror_tasks(args.mirror, num_areas, seed + index, env_params)
         else:
-            tasks.append(make_task(name, num_areas=num_areas, seed=seed + index, env_params=env_params))
+            tasks.append(make_task(name, num_areas=num_areas, seed=seed + index, env_params=env_params,
+                                   agents_per_area=args.agents_per_area))
     for task in tasks:
         academy = Academy(task, args.decision_period, counter)  # construction is the first RESET
         brains = {key: build_brain_parameters(key, task.action_spec) for key, _ in academy.behaviors}

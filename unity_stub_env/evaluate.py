@@ -9,8 +9,8 @@ baselines are always evaluated beside it. Printed per policy, for the scripted a
 throws: hit rate, the hit rate of the throws aimed above the pelvis (with their count: the ones
 fixed feet leave dodgeable), balance-loss rate, pass rate, mean effort (the effort terms' magnitudes summed
 over an episode, averaged over the episodes) and mean episode return. ``mimic``: per reference motion,
-the fraction of trials that kept their balance for 10 s and the mean reward terms r_r, r_v, r_m, r_e,
-r_t; then standing under pushes of growing impulse (``unity_stub_env.tasks.mimic.evaluate``), with
+the fraction of trials that kept their balance for 10 s, the percentage of the maximum reward
+and the mean reward terms r_r, r_v, r_m, r_e, r_t; then standing under pushes of growing impulse (``unity_stub_env.tasks.mimic.evaluate``), with
 an extra row for the PD controllers tracking the reference on their own. Tasks with an evaluation
 are the keys of ``_evaluations``.
 """
@@ -39,7 +39,7 @@ def _evaluations() -> dict:
 
 
 # The options ``--evaluate-option KEY=VALUE`` may set, per task (float values).
-OPTIONS = {"mimic": ("residual",)}
+OPTIONS = {"mimic": ("residual", "decision_hz", "effort_weight")}
 
 
 # Rows a task evaluates beside the baselines: label -> (policy, the task's evaluate options).
@@ -108,7 +108,7 @@ def parse_options(task_name: str, pairs: list[str]) -> dict[str, float]:
 
 
 def run(task_name: str, policies: list[str], seed: int, episodes: int | None, json_path: str | None = None,
-        option_pairs: list[str] | None = None) -> int:
+        option_pairs: list[str] | None = None, video_dir: str | None = None) -> int:
     """Evaluate every policy (baselines added), print a table; exit code 0, or 2 on bad input."""
     evaluations = _evaluations()
     if task_name not in evaluations:
@@ -137,6 +137,17 @@ def run(task_name: str, policies: list[str], seed: int, episodes: int | None, js
         print(f"unity-stub-env: {error}", file=sys.stderr)
         return 2
     print(format_results(results))
+    if video_dir is not None:  # one clip per scripted case of each policy asked for (unity_stub_env.render)
+        from unity_stub_env.render import RenderError
+        from unity_stub_env.render.evaluate_clips import write
+
+        try:
+            clips = write(task_name, {name: actors[name] for name in dict.fromkeys(policies)}, seed, video_dir,
+                          options)
+        except RenderError as error:
+            print(f"unity-stub-env: {error}", file=sys.stderr)
+            return 2
+        print(f"Wrote {len(clips)} clips to {video_dir}")
     if json_path:
         Path(json_path).write_text(json.dumps({"task": task_name, "seed": seed, "options": options,
                                                "results": results}, indent=1))

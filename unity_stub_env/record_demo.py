@@ -99,8 +99,9 @@ SCRIPTED: dict[str, Callable[[Task], Act]] = {"basic": _basic_expert, "ball3d": 
                                               "mimic": _mimic_expert}
 
 
-def onnx_policy(path: str, task: Task) -> Act:
-    """The deterministic actions of an exported model (ML-Agents ONNX contract)."""
+def onnx_policy(path: str, task: Task, stochastic: bool = False) -> Act:
+    """The deterministic actions of an exported model (ML-Agents ONNX contract); ``stochastic``:
+    the sampled ones instead (the contract's ``continuous_actions`` / ``discrete_actions``)."""
     if not Path(path).is_file():
         raise RecordError(f"--policy {path!r} is neither 'scripted' nor an existing .onnx file")
     try:
@@ -115,8 +116,9 @@ def onnx_policy(path: str, task: Task) -> Act:
     outputs = {o.name for o in session.get_outputs()}
     expected = {f"obs_{i}" for i in range(len(task.observation_specs))}
     spec = task.action_spec
-    wanted = (["deterministic_continuous_actions"] if spec.continuous_size else []) + (
-        ["deterministic_discrete_actions"] if spec.discrete_branches else [])
+    prefix = "" if stochastic else "deterministic_"
+    wanted = ([f"{prefix}continuous_actions"] if spec.continuous_size else []) + (
+        [f"{prefix}discrete_actions"] if spec.discrete_branches else [])
     if not expected <= inputs or "recurrent_in" in inputs or not set(wanted) <= outputs:
         raise RecordError(f"--policy {path!r} does not fit task {task.name!r}: it takes {sorted(inputs)} and "
                           f"gives {sorted(outputs)}, the task needs inputs {sorted(expected)} and outputs "
@@ -130,8 +132,8 @@ def onnx_policy(path: str, task: Task) -> Act:
                                     else (~np.asarray(mask, bool)).astype(np.float32))
         result = dict(zip(wanted, session.run(wanted, feed)))
         n = len(obs[0])
-        continuous = np.asarray(result.get("deterministic_continuous_actions", np.zeros((n, 0))), np.float32)
-        discrete = np.asarray(result.get("deterministic_discrete_actions", np.zeros((n, 0))), np.int32)
+        continuous = np.asarray(result.get(f"{prefix}continuous_actions", np.zeros((n, 0))), np.float32)
+        discrete = np.asarray(result.get(f"{prefix}discrete_actions", np.zeros((n, 0))), np.int32)
         return continuous.reshape(n, spec.continuous_size), discrete.reshape(n, len(spec.discrete_branches))
     return act
 

@@ -129,8 +129,9 @@ def submit(args: argparse.Namespace, learn_args: list[str]) -> int:
 
 
 def final_rewards(run_dir: Path) -> dict[str, tuple[int, float | None]]:
-    """{behavior: (last summary step, last mean reward)} from the run's TensorBoard files."""
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    """{behavior: (last summary step, last mean reward)} from the run's TensorBoard files (read as
+    mlagents-like-plot reads them)."""
+    from trainer.plot import DEFAULT_TAG, read_scalars
 
     out = {}
     if not run_dir.is_dir():
@@ -138,13 +139,9 @@ def final_rewards(run_dir: Path) -> dict[str, tuple[int, float | None]]:
     for child in sorted(run_dir.iterdir()):
         if not child.is_dir() or not any(n.startswith("events.out.tfevents") for n in os.listdir(child)):
             continue
-        acc = EventAccumulator(str(child), size_guidance={"scalars": 0})
-        acc.Reload()
-        if "Environment/Cumulative Reward" in acc.Tags()["scalars"]:
-            last = acc.Scalars("Environment/Cumulative Reward")[-1]
-            out[child.name] = (last.step, last.value)
-        else:
-            out[child.name] = (0, None)
+        scalars = read_scalars(child, DEFAULT_TAG)
+        out[child.name] = (0, None) if scalars is None or not len(scalars[0]) else \
+            (int(scalars[0][-1]), float(scalars[2][-1]))
     return out
 
 
@@ -163,10 +160,35 @@ def summary(folder: Path) -> int:
             table.append(row + ["-", "-", "no results yet"])
         for behavior, (step, reward) in rewards.items():
             table.append(row + [behavior, str(step), "-" if reward is None else f"{reward:.4f}"])
+    _print_table(table)
+    grouped = _seed_means(folder)
+    if grouped:
+        print("\nmean over seeds at the last step every seed reached (mlagents-like-plot's aggregation: "
+              "mlagents-like-plot FOLDER -o curves.png draws these curves)")
+        _print_table([["setting/behavior", "seeds", "step", "mean reward", "95% CI"]] + grouped)
+    return 0
+
+
+def _print_table(table: list[list[str]]) -> None:
     widths = [max(len(str(r[i])) for r in table) for i in range(len(table[0]))]
     for r in table:
         print("  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip())
-    return 0
+
+
+def _seed_means(folder: Path) -> list[list[str]]:
+    """Per setting and behavior, the last point of mlagents-like-plot's curve of the sweep: the mean
+    of its seeds' rewards and the 95 % band (trainer.plot.aggregate), so table and plot agree."""
+    from trainer.plot import PlotError, curves
+
+    try:
+        drawn = curves([str(folder)])
+    except PlotError:
+        return []
+    rows = []
+    for c in drawn:
+        band = "-" if c.low is None else f"{c.low[-1]:.4f} .. {c.high[-1]:.4f}"
+        rows.append([c.name, str(c.runs), f"{c.x[-1]:g}", f"{c.y[-1]:.4f}", band])
+    return rows
 
 
 def main(argv: list[str]) -> int:

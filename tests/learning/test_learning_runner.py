@@ -19,7 +19,7 @@ def scalars(folder, tag: str) -> list[tuple[int, float]]:
 def test_an_hmm_sampler_sets_the_runners_tracks(tmp_path, env_no_proxy):
     """`track: {sampler_type: hmm, length: 30}`: every episode's track is the start platform and
     the 30 sent platforms (Runner/Track Length 31; the runner's own zones give 15..27)."""
-    model = ROOT / "unity_stub_env" / "tasks" / "runner_data" / "desert_platforms.json"
+    model = ROOT / "unity_stub_env" / "tasks" / "runner" / "data" / "desert_platforms.json"
     text = (ROOT / "configs" / "runner.yaml").read_text().split("environment_parameters:")[0]
     text = text.replace("max_steps: 200000", "max_steps: 3000").replace("summary_freq: 10000", "summary_freq: 1000")
     text += ("environment_parameters:\n  track:\n    sampler_type: hmm\n    sampler_parameters:\n"

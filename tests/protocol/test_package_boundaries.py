@@ -2,6 +2,8 @@
 
 * ``protos`` (the wire contract) imports neither ``trainer`` nor ``unity_stub_env``;
 * ``unity_stub_env`` imports ``protos``, itself and third-party libraries, never ``trainer``;
+  the Gymnasium and PettingZoo forms (the ``gym`` extra) are imported only in ``unity_stub_env/gym/``
+  (and ``mlagents_like_envs/envs/``), so the stub and the API run without them;
 * ``trainer`` uses only the stub's public API: names in ``unity_stub_env.__all__``, imported from
   the package itself (``from unity_stub_env import TASK_NAMES``), never a stub module;
 * ``mlagents_like_envs`` (the mlagents_envs-compatible API) drives environments through the
@@ -75,6 +77,16 @@ def test_package_imports_none_of(package, forbidden):
     bad = [f"{where}:{line} imports {module}" for where, line, module, _ in imports(package)
            if top(module) in forbidden]
     assert bad == []
+
+
+@pytest.mark.parametrize("package, home", [("unity_stub_env", "unity_stub_env/gym/"),
+                                           ("mlagents_like_envs", "mlagents_like_envs/envs/")])
+def test_only_the_gym_subpackages_import_the_gym_extra(package, home):
+    bad = [f"{where}:{line} imports {module}" for where, line, module, _ in imports(package)
+           if top(module) in {"gymnasium", "pettingzoo"} and not where.startswith(home)]
+    assert bad == []
+    assert any(where.startswith(home) and top(module) == "gymnasium"
+               for where, _, module, _ in imports(package))  # the scan sees that subpackage
 
 
 def test_trainer_uses_only_the_stubs_public_api():

@@ -291,3 +291,62 @@ def test_cli_list_shows_mimic(capsys):
     assert main(["--list"]) == 0
     line = [row for row in capsys.readouterr().out.splitlines() if row.startswith("mimic:")][0]
     assert "[170]" in line and "continuous=26" in line
+
+
+def test_decision_hz_250_steps_once_per_mujoco_step_on_the_resampled_reference():
+    slow, fast = _task(), _task(decision_hz=250, rsi=0, motion=1)
+    assert (slow.decision_hz, slow.substeps, slow.max_step) == (50, 5, 500)
+    assert (fast.decision_hz, fast.substeps, fast.max_step, fast.control_dt) == (250, 1, 2500, 0.004)
+    np.testing.assert_array_equal(fast.ref.frames, 5 * slow.ref.frames)
+    # every fifth frame is a clip frame; between two, the joints move a fifth of the way each step
+    arms = slice(fast.ref.offset[1], fast.ref.offset[1] + fast.ref.frames[1])
+    clip = load_motion("arms").qpos
+    np.testing.assert_allclose(fast.ref.qpos[arms][::5], clip, atol=1e-12)
+    np.testing.assert_allclose(fast.ref.qpos[arms][2, 7:], clip[0, 7:] + 0.4 * (clip[1, 7:] - clip[0, 7:]), atol=1e-12)
+    # the walk's last frames lead into the next stride, not back to the start
+    walk, steps = fast.ref.qpos[fast.ref.offset[3]:fast.ref.offset[3] + fast.ref.frames[3], 1], load_motion("walk").qpos[:, 1]
+    stride = fast.ref.stride[3]
+    assert stride > 0 and walk[-1] == pytest.approx(steps[-1] + 0.8 * (steps[0] + stride - steps[-1]), abs=1e-12)
+    np.testing.assert_allclose(fast.ref.speed, slow.ref.speed, rtol=1e-12)
+    before = fast.data.time
+    fast.step(np.zeros((N, 26)), np.zeros((N, 0)))
+    assert fast.data.time - before == pytest.approx(0.004) and (fast.frame == 1).all()
+
+
+def test_decision_hz_must_fit_the_physics_and_the_clips_and_change_only_at_a_reset():
+    for bad in (30, 100, 0):
+        with pytest.raises(ValueError, match="decision_hz must divide 250"):
+            _task(decision_hz=bad)
+    env = EnvironmentParameters()
+    task = MimicTask(1, 0, env)
+    env.set("decision_hz", lambda: 250)
+    with pytest.raises(ValueError, match="changed from 50 to 250"):
+        task.reset(np.arange(N) == 0)
+    task.reset()  # a RESET: every agent restarts, the rate may change
+    assert task.decision_hz == 250 and task.substeps == 1
+
+
+def test_effort_weight_scales_the_reward_by_the_mean_relative_actuator_force():
+    plain = _task(decision_hz=250, rsi=0, motion=2)
+    tired = _task(decision_hz=250, rsi=0, motion=2, effort_weight=0.5)
+    action = np.full((N, 26), 0.3)
+    a = plain.step(action, np.zeros((N, 0)))
+    b = tired.step(action, np.zeros((N, 0)))
+    # one MuJoCo step per decision at 250 Hz: the factor comes from this step's actuator forces
+    force = np.abs(tired.data.actuator_force[tired.actuator]) / np.array([400.0] * 3 + [60.0] * 3 + [100.0] * 3
+                                                                        + [60.0] + [100.0] * 3 + [60.0]
+                                                                        + [400.0] * 4 + [250.0] * 2 + [400.0] * 4
+                                                                        + [250.0] * 2)
+    np.testing.assert_allclose(tired.last_effort, force.mean(axis=1), rtol=1e-12)
+    assert 0.0 < tired.last_effort.min() and tired.last_effort.max() < 1.0
+    np.testing.assert_allclose(b.rewards, a.rewards * (1.0 - 0.5 * force.mean(axis=1)), rtol=1e-5)
+
+
+def test_percent_of_max_reward_counts_the_decisions_after_a_fall_as_zero():
+    zero = lambda obs: np.zeros((len(obs), 26))  # noqa: E731
+    stand = run_trials(zero, motion=0, trials=N, seed=0)
+    assert stand["balance_kept"] == 1.0 and stand["percent_of_max"] == pytest.approx(100.0, abs=0.1)
+    walk = run_trials(zero, motion=3, trials=N, seed=0)  # falls within a second
+    assert walk["balance_kept"] == 0.0
+    # reward per decision while up x the share of the 10 s it stayed up
+    assert walk["percent_of_max"] == pytest.approx(100.0 * walk["mean_reward"] * walk["mean_seconds"] / 10.0, rel=1e-6)

@@ -15,7 +15,7 @@ from trainer.side_channel_payloads import environment_parameter_messages
 from unity_stub_env.communicator import SideChannelState
 from unity_stub_env.tasks import EnvironmentParameters, make_task
 from unity_stub_env.tasks import runner as R
-from unity_stub_env.tasks.runner_data import make_models
+from unity_stub_env.tasks.runner.data import make_models
 
 
 def _params(**values) -> EnvironmentParameters:
@@ -57,11 +57,29 @@ def test_a_track_is_a_pure_function_of_its_seed_and_follows_the_zone_rules():
         starts = [1] + [i + 1 for i, kind in enumerate(track.kinds) if kind == "Transition"]
         assert [track.zones[i] for i in starts] == [(first + z) % 3 for z in range(4)]
         assert set(track.kinds[1:]) <= {"Left", "Right", "Straight", "Transition"}
-        for kind, row in zip(track.kinds, track.props):
+        for kind, zone, row in zip(track.kinds, track.zones, track.props):
             assert len(row) == 3
             if kind in ("Start", "Transition"):
-                assert row == ["-"] * 3
-            assert any(label in ("-", "coin") for label in row)  # never a blocked platform
+                assert row == [[], [], []]
+            assert any(not spawn or spawn[0] == "coin" for spawn in row)  # never a blocked platform
+            for spawn, most in zip(row, R.SPAWN_STACKS[R.ZONES[zone]]):
+                assert len(spawn) <= most and "-" not in spawn
+                assert len({label == "coin" for label in spawn}) <= 1  # coins or obstacles, not both
+
+
+def test_stackable_spawn_points_take_their_share_of_the_chain_bottom_first():
+    assert R.stack(["hay", "hay"]) == ["hay", "hay"]
+    assert R.stack(["-", "hay"]) == []  # nothing floats above an empty place
+    assert R.stack(["rock", "coin", "rock"]) == ["rock"]  # no coin on an obstacle
+    assert R.stack(["coin", "coin", "-"]) == ["coin", "coin"]
+    track = R.Track(["Start", "Straight"], [0, 0], [[[], [], []], [["car"], ["crate", "crate"], ["coin"]]])
+    assert track.prop_codes().tolist() == [[0, 0, 0], [-1, -2, 1]]
+    # the seed's largest generator: 20 states, 10 labels (urban props); every zone stacks somewhere
+    _, urban = R.zone_models("urban")
+    assert (urban.num_states, len(urban.labels)) == (20, 10)
+    assert all(max(sizes) > 1 for sizes in R.SPAWN_STACKS.values())
+    stacked = [len(spawn) for seed in range(30) for row in R.generate_track(seed).props for spawn in row]
+    assert max(stacked) >= 2
 
 
 def test_the_environment_parameters_choose_zones_and_lengths():
@@ -115,6 +133,11 @@ def test_obstacles_and_coins_when_passing_their_spawn_points():
     progress = 0.1 * 0.8 / 4.0
     assert result.rewards.tolist() == pytest.approx([progress - 0.3, progress + 0.1, progress, progress - 0.3 + 0.1])
     assert task.props[:, 1].tolist() == [[0, 0, 0]] * n  # passed props no longer show
+    task.props[:, 2] = [-2, 0, 2]  # platform 2: two stacked obstacles left, two stacked coins right
+    task.s[:] = 8.0 + 1.5
+    task.y[:] = [1.0, 0.0, -1.0, 0.5][:n]
+    result = task.step(np.zeros((n, 1)), np.zeros((n, 0)))
+    assert result.rewards.tolist() == pytest.approx([progress - 0.6, progress, progress + 0.2, progress - 0.6])
 
 
 def test_a_hand_written_driver_finishes_held_out_tracks_and_doing_nothing_does_not():

@@ -134,3 +134,20 @@ def test_mid_era_curriculum_and_parameter_randomization(tmp_path):
 def test_modern_file_with_typo_is_not_taken_for_legacy(tmp_path):
     with pytest.raises(ConfigError, match="Did you mean 'behaviors'"):
         load_text(tmp_path, "behavior:\n  A: {trainer_type: ppo}\n")
+
+
+def test_0x_step_counts_become_agent_steps_at_first_contact_and_1x_ones_stay(tmp_path, caplog):
+    with caplog.at_level("WARNING", logger="mlagents_like"):
+        options = load_text(tmp_path, SEED_000)
+    assert options.legacy_env_steps
+    assert "Dodge: max_steps 5000000, summary_freq 1000" in caplog.text  # the load-time note, with numbers
+    before = options.behavior_settings("Dodge")
+    after = options.behavior_settings("Dodge", agents=14)
+    assert (before.max_steps, before.summary_freq) == (5000000, 1000)
+    assert (after.max_steps, after.summary_freq) == (70000000, 14000)  # the seed's 5e6 on 14 agents
+    modern = tmp_path / "modern.yaml"
+    modern.write_text("behaviors:\n  Dodge:\n    trainer_type: ppo\n    max_steps: 2000\n    summary_freq: 500\n")
+    options = load_run_options(str(modern))
+    assert not options.legacy_env_steps
+    settings = options.behavior_settings("Dodge", agents=14)
+    assert (settings.max_steps, settings.summary_freq) == (2000, 500)

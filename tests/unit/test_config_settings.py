@@ -249,10 +249,11 @@ def test_dodge_configs_carry_the_thesis_values_and_agree(caplog):
     assert modern.hyperparameters == legacy.hyperparameters and modern.network_settings == legacy.network_settings
 
 
-def test_mimic_config_carries_the_thesis_values():
+def test_mimic_config_carries_the_seed_values_restated_for_its_rate():
     """configs/mimic.yaml: the mimic thesis' final hyperparameters (batch 1000, buffer 20000, lr 1e-4 linear,
-    beta 5e-4, epsilon 0.2, lambd 0.95, 2 epochs, normalize, 2 x 1024, gamma 0.99, horizon 1250,
-    5e7 steps, checkpoints every 200k, summaries every 25k) and the motion parameter (0, stand)."""
+    beta 5e-4, epsilon 0.2, lambd 0.95, 2 epochs, normalize, 2 x 1024, checkpoints every 200k,
+    summaries every 25k); its per-decision values at 250 Hz (gamma 0.99, horizon 1250 = 5 s, 5e7
+    steps) restated for the 50 decisions per second it runs at, and the motion parameter (0, stand)."""
     options = load_run_options(os.path.join(REPO, "configs", "mimic.yaml"))
     mimic = options.behaviors["Mimic"]
     hp, net = mimic.hyperparameters, mimic.network_settings
@@ -260,7 +261,11 @@ def test_mimic_config_carries_the_thesis_values():
         1000, 20000, 1e-4, 5e-4, 0.2, 0.95, 2)
     assert hp.learning_rate_schedule == "linear"
     assert (net.normalize, net.num_layers, net.hidden_units) == (True, 2, 1024)
-    assert mimic.reward_signals["extrinsic"].gamma == 0.99 and mimic.reward_signals["extrinsic"].strength == 1.0
-    assert (mimic.max_steps, mimic.time_horizon, mimic.summary_freq, mimic.checkpoint_interval,
-            mimic.keep_checkpoints) == (50_000_000, 1250, 25000, 200000, 5)
-    assert set(options.environment_parameters) == {"motion"}
+    rate = options.environment_parameters["decision_hz"].curriculum[0].value.value
+    assert rate == 50
+    # the same discount per simulated second and the same horizon and budget in simulated seconds
+    assert mimic.reward_signals["extrinsic"].gamma == pytest.approx(0.99 ** (250 / rate), abs=5e-4)
+    assert mimic.reward_signals["extrinsic"].strength == 1.0
+    assert (mimic.time_horizon / rate, mimic.max_steps / rate) == (1250 / 250, 50_000_000 / 250)
+    assert (mimic.summary_freq, mimic.checkpoint_interval, mimic.keep_checkpoints) == (25000, 200000, 5)
+    assert set(options.environment_parameters) == {"motion", "decision_hz"}

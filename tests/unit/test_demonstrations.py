@@ -360,9 +360,9 @@ def test_gail_trains_beside_a_recurrent_policy():
     assert math.isfinite(stats["Losses/GAIL Loss"]) and "Policy/GAIL Grad Mag Loss" in stats
 
 
-def test_a_trainer_without_a_cloning_hook_or_gail_provider_refuses_them(tmp_path):
-    """After merges more trainer types exist: one that would ignore behavioral_cloning or gail
-    says so (exit 2) instead of training without them."""
+def test_a_trainer_without_a_gail_provider_refuses_gail(tmp_path):
+    """A trainer that built no GAIL learner says so (exit 2) instead of training without it; every
+    Trainer has the cloning hook (trainer/common/trainer_interface.py), so only GAIL can be missing."""
     from trainer.behavior import attach_demonstrations
     from trainer.config.loader import load_run_options
 
@@ -371,10 +371,11 @@ def test_a_trainer_without_a_cloning_hook_or_gail_provider_refuses_them(tmp_path
                                      f"    reward_signals: {{extrinsic: {{}}, gail: {{demo_path: {path}}}}}\n")
     settings = load_run_options(str(tmp_path / "c.yaml")).behaviors["B"]
 
-    class Bare:  # neither hook
+    class Bare:  # no GAIL provider
         policy = None
+        providers: dict = {}
 
-    with pytest.raises(ConfigError, match="behaviors.B.behavioral_cloning: not implemented for trainer_type ppo"):
+    with pytest.raises(ConfigError, match="behaviors.B.reward_signals.gail: not implemented for trainer_type ppo"):
         attach_demonstrations(Bare(), "B", HYBRID, settings, seed=0)
     hyper = PPOHyperparams(hidden_units=8, num_layers=1, reward_signals={"extrinsic": (0.99, 1.0), "gail": (0.99, 1.0)},
                            reward_signal_networks={"gail": SignalNetwork(hidden_units=8)})

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from trainer.common.distributions import EPSILON
+from trainer.common import numpy_distributions
 from trainer.common.encoders import VectorInput
 from trainer.common.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN, Actor, Critic, NetworkBody
 
@@ -224,11 +224,9 @@ class NumpyCritic(_NumpyModule):
 
 
 def _gaussian_terms(log_sigma: np.ndarray) -> tuple:
-    """What the Gaussian's log-prob and entropy need of log_sigma [1, c]: sigma, 2 sigma^2 + eps,
-    log(sigma + eps), the mean entropy."""
-    sigma = np.exp(log_sigma.astype(np.float32))
-    return (sigma, 2 * sigma**2 + EPSILON, np.log(sigma + EPSILON),
-            np.mean(0.5 * np.log(2 * np.pi * np.e * sigma**2 + EPSILON)))
+    """What acting needs of log_sigma [1, c] besides the log-prob: sigma (to scale the noise) and
+    the entropy's mean over the dimensions."""
+    return np.exp(log_sigma), np.mean(numpy_distributions.gaussian_entropy(log_sigma))
 
 
 class NumpyActor(_NumpyModule):

@@ -12,21 +12,20 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 
+from trainer.common import numpy_distributions as nd
 from trainer.common import numpy_net
 from trainer.common.distributions import (
-    EPSILON,
     categorical_entropy,
     categorical_log_prob,
+    combined_entropy,
     gaussian_entropy,
     gaussian_log_prob,
 )
-from trainer.ppo.hyperparams import PPOHyperparams
-from trainer.common.distributions import combined_entropy
 from trainer.common.networks import Actor
+from trainer.ppo.hyperparams import PPOHyperparams
 from protos.types import ActionTuple, BehaviorSpec
 
 CONTINUOUS_CLIP = 3.0
-_HALF_LOG_2PI = 0.5 * np.log(2 * np.pi)  # a float64 scalar: the Gaussian terms in float64, as before
 _MAX, _SUM = np.maximum.reduce, np.add.reduce  # ndarray.max/sum without their Python wrappers
 
 
@@ -37,7 +36,7 @@ def _numpy_entropy(n: int, gaussian_mean: float | None, branch_probs: list[np.nd
     if gaussian_mean is not None:
         entropy = entropy + gaussian_mean
     for probs in branch_probs:
-        entropy = entropy - (probs * np.log(probs + EPSILON)).sum(axis=1)
+        entropy = entropy + nd.categorical_entropy(probs)
     return entropy.astype(np.float32)
 
 
@@ -170,13 +169,13 @@ class Policy:
         log_parts: list[np.ndarray] = []
         gaussian_entropy, branch_probs = None, []
         if mu is not None:
-            sigma, variance_term, log_term, gaussian_entropy_mean = self._numpy_actor.gaussian()
+            sigma, gaussian_entropy_mean = self._numpy_actor.gaussian()
             if deterministic:
                 raw = mu
             else:
                 noise = torch.randn(mu.shape, generator=self.generator).numpy()
                 raw = mu + noise * sigma
-            log_parts.append(-((raw - mu) ** 2) / variance_term - log_term - _HALF_LOG_2PI)
+            log_parts.append(nd.gaussian_log_prob(raw, mu, self._numpy_actor.log_sigma, float64_constant=True))
             gaussian_entropy = gaussian_entropy_mean
             raw = raw.astype(np.float32, copy=False)
             env_continuous = np.minimum(np.maximum(raw, -CONTINUOUS_CLIP), CONTINUOUS_CLIP) / CONTINUOUS_CLIP
@@ -200,10 +199,8 @@ class Policy:
         branch's log-prob [n, 1] is appended to ``log_parts``."""
         discrete = np.empty((n, len(logits)), dtype=np.int32)
         branch_probs = []
-        rows = np.arange(n) if logits else None
         for index, branch_logits in enumerate(logits):
-            z = np.exp(branch_logits - _MAX(branch_logits, axis=1, keepdims=True))
-            probs = z / _SUM(z, axis=1, keepdims=True)
+            probs = nd.softmax(branch_logits)
             if deterministic:
                 action = probs.argmax(axis=1)
             else:
@@ -214,7 +211,7 @@ class Policy:
                     last_allowed = probs.shape[1] - 1 - (probs[:, ::-1] > 0).argmax(axis=1)
                     action = np.minimum(action, last_allowed)
             discrete[:, index] = action
-            log_parts.append(np.log(probs[rows, action] + EPSILON)[:, None])
+            log_parts.append(nd.categorical_log_prob(probs, action)[:, None])
             branch_probs.append(probs)
         return discrete, branch_probs
 

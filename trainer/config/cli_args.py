@@ -142,6 +142,8 @@ def _add_general_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--torch", action=_Removed, help="(removed) does nothing")
     parser.add_argument("--tensorflow", action=_Removed, help="(removed) does nothing")
     _setting_flag(parser, ckpt, "results_dir", "base folder of all runs")
+    _setting_flag(parser, ckpt, "record_video", "--env stub:TASK: after each checkpoint, a background process films "
+                  "its ONNX to <Behavior>-<step>.mp4 beside it and into TensorBoard (Images)")
     _setting_flag(parser, env, "timeout_wait", "seconds to wait for each simulator message")
     _setting_flag(parser, env, "bind", "address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")
     shipped = parser.add_argument_group(title="Files the package ships (without a checkout of the repository)")

@@ -4,7 +4,11 @@
   ``trainer: ppo``, ``lambd``, ``num_layers``, ``hidden_units``, ``normalize``, ``use_recurrent``, ...
   ``default`` becomes ``default_settings`` (0.x used it for every unlisted brain) and each behavior
   becomes a full block from ``default`` updated by its own keys. A flat ``gamma`` is the extrinsic
-  reward's gamma.
+  reward's gamma. ``max_steps`` and ``summary_freq`` keep their 0.x meaning: the 0.x trainers
+  advanced their step counter once per environment step, whatever the number of agents, so these
+  counts are environment steps of one simulator. They become agent steps at the behavior's first
+  contact, times the number of its agents in one simulator (``RunOptions.behavior_settings``);
+  ``log_agent_steps`` then shows the numbers and the modern block with the converted values.
 * Mid-era (0.17-0.18): ``behaviors:`` plus top-level ``curriculum:`` / ``parameter_randomization:``,
   which become ``environment_parameters``.
 
@@ -17,6 +21,7 @@ from typing import Any, Mapping
 
 import yaml
 
+from trainer.config.settings import settings_as_dict
 from trainer.errors import ConfigError
 
 logger = logging.getLogger("mlagents_like")
@@ -162,6 +167,39 @@ def _convert_mid_era(raw: dict) -> dict:
     return modern
 
 
+def env_step_note(modern: Mapping) -> str:
+    """What the warning says about a 0.x file's step counts, with each behavior's numbers."""
+    default = modern.get("default_settings") or {}
+
+    def count(block: Mapping, key: str, fallback: str) -> str:
+        value = block.get(key, default.get(key))
+        try:  # 0.x files write counts like 5.0e6
+            return f"{int(float(value))}" if float(value) == int(float(value)) else str(value)
+        except (TypeError, ValueError):
+            return fallback if value is None else str(value)
+
+    counts = [f"{name}: max_steps {count(block, 'max_steps', 'the default 500000')}, "
+              f"summary_freq {count(block, 'summary_freq', 'the default 50000')}"
+              for name, block in modern["behaviors"].items()]
+    return ("Step counts keep their 0.x meaning, environment steps of one simulator whatever the number "
+            "of agents (" + "; ".join(counts) + "): at a behavior's first contact they are multiplied by "
+            "its agents in one simulator and become agent steps (e.g. max_steps 2000 with 14 agents: 28000). "
+            "The YAML below still shows the 0.x counts; the converted values are logged at first contact.")
+
+
+def log_agent_steps(brain: str, agents: int, written: Any, converted: Any) -> None:
+    """At ``brain``'s first contact: its 0.x step counts (``written``, TrainerSettings as in the
+    file) as agent steps with ``agents`` agents in one simulator, and the modern block with the
+    values the run uses (``converted``)."""
+    logger.warning(
+        "%s: %d agents in one simulator, so the 0.x max_steps %d and summary_freq %d (environment steps) "
+        "are %d and %d agent steps. The modern equivalent of this behavior, with these values:\n%s",
+        brain, agents, written.max_steps, written.summary_freq, written.max_steps * agents,
+        written.summary_freq * agents,
+        yaml.safe_dump({"behaviors": {brain: settings_as_dict(converted)}}, sort_keys=False),
+    )
+
+
 def convert_if_legacy(raw: dict, path: str) -> dict:
     """``raw`` unchanged if modern; else converted, with a WARNING showing the modern YAML."""
     if is_legacy_flat(raw):
@@ -173,6 +211,8 @@ def convert_if_legacy(raw: dict, path: str) -> dict:
     else:
         return raw
     notes = "".join(f" Dropped from '{section}': {', '.join(keys)}." for section, keys in dropped.items())
+    if what == "the ML-Agents 0.x trainer format":
+        notes += " " + env_step_note(modern)
     logger.warning(
         "%s is in %s; it was converted on load.%s The modern equivalent (save it to silence this warning):\n%s",
         path, what, notes, yaml.safe_dump(modern, sort_keys=False),

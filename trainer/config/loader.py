@@ -14,7 +14,7 @@ import yaml
 
 from trainer.artifacts.atomic import atomic_write
 from trainer.config.env_params import structure_environment_parameters
-from trainer.config.legacy import convert_if_legacy
+from trainer.config.legacy import convert_if_legacy, is_legacy_flat
 from trainer.config.settings import (
     CheckpointSettings,
     EngineSettings,
@@ -97,6 +97,11 @@ def read_yaml_file(path: str) -> Any:
 
 def load_config_dict(path: str) -> dict:
     """The top-level mapping of ``path``, converted to the modern layout if it is legacy."""
+    return _load_config(path)[0]
+
+
+def _load_config(path: str) -> tuple[dict, bool]:
+    """(the modern-layout mapping of ``path``, whether it was an ML-Agents 0.x flat file)."""
     raw = read_yaml_file(path)
     if raw is None:
         raise ConfigError(f"Config file {path} is empty. It needs at least a 'behaviors:' section.")
@@ -105,7 +110,7 @@ def load_config_dict(path: str) -> dict:
             f"Config file {path} must hold a mapping at the top level (behaviors:, ...), "
             f"not a {type(raw).__name__}."
         )
-    return convert_if_legacy(dict(raw), path)
+    return convert_if_legacy(dict(raw), path), is_legacy_flat(raw)
 
 
 def _structure_section(cls: type, raw: Mapping, key: str) -> Any:
@@ -144,12 +149,14 @@ def run_options_from_dict(raw: Mapping, config_path: str | None = None) -> RunOp
 
 
 def load_yaml_run_options(path: str) -> RunOptions:
-    """Read and structure ``path``; errors are prefixed with the file name. No cross-checks."""
-    raw = load_config_dict(path)
+    """Read and structure ``path``; errors are prefixed with the file name. No cross-checks. A 0.x
+    file's step counts keep their meaning (``RunOptions.legacy_env_steps``)."""
+    raw, legacy = _load_config(path)
     try:
-        return run_options_from_dict(raw, config_path=path)
+        options = run_options_from_dict(raw, config_path=path)
     except ConfigError as error:
         raise ConfigError(f"{path}: {error}") from None
+    return dataclasses.replace(options, legacy_env_steps=True) if legacy else options
 
 
 def load_run_options(path: str) -> RunOptions:

@@ -229,6 +229,7 @@ class CheckpointSettings:
     train_model: bool = False
     inference: bool = False
     results_dir: str = "results"
+    record_video: bool = False  # --record-video: a clip of each checkpoint (trainer/artifacts/clips.py)
 
     @property
     def write_path(self) -> str:
@@ -269,11 +270,16 @@ class RunOptions:
     #: --max-steps N: every behavior stops at N steps and summarizes at least every N / 10 (a short
     #: CI run of a project's YAML, docs/mirror.md); configuration.yaml keeps the YAML's values
     max_steps_override: int | None = None
+    #: the file was an ML-Agents 0.x one: its max_steps and summary_freq count environment steps of
+    #: one simulator, and become agent steps once the behavior's agents are counted (docs/configuration.md)
+    legacy_env_steps: bool = False
 
-    def behavior_settings(self, brain_name: str) -> TrainerSettings:
+    def behavior_settings(self, brain_name: str, agents: int | None = None) -> TrainerSettings:
         """The settings for ``brain_name`` (no ``?team=``), with init_path resolved for
-        --initialize-from. Raises ConfigError for an unconfigured behavior when a config file
-        was given and it has no default_settings."""
+        --initialize-from. With ``legacy_env_steps``, ``agents`` (the behavior's agents in one
+        simulator, known at first contact) turns max_steps and summary_freq into agent steps.
+        Raises ConfigError for an unconfigured behavior when a config file was given and it has
+        no default_settings."""
         settings = self.behaviors.get(brain_name, self.default_settings)
         if settings is None:
             if self.config_path is not None:
@@ -290,6 +296,9 @@ class RunOptions:
             if self.cli_deterministic:
                 network = dataclasses.replace(settings.network_settings, deterministic=True)
                 settings = dataclasses.replace(settings, network_settings=network)
+        if self.legacy_env_steps and agents is not None:
+            settings = dataclasses.replace(settings, max_steps=settings.max_steps * agents,
+                                           summary_freq=settings.summary_freq * agents)
         if self.max_steps_override is not None:
             settings = dataclasses.replace(settings, max_steps=self.max_steps_override,
                                            summary_freq=min(settings.summary_freq,

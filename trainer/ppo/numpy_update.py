@@ -33,7 +33,6 @@ child's result is copied in), says so once, and stops forking for the rest of th
 from __future__ import annotations
 
 import logging
-import math
 import mmap
 import os
 import select
@@ -47,11 +46,9 @@ import numpy as np
 from trainer.envs.cpus import usable_cpus
 from trainer.common import numpy_net
 from trainer.common.adam import Adam, Stretch
-from trainer.common.distributions import EPSILON, MASKED_LOGIT_OFFSET
+from trainer.common import numpy_distributions as nd
 
 logger = logging.getLogger(__name__)
-_LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
-_TWO_PI_E = 2 * math.pi * math.e
 
 
 # rows x critic parameters of an update below which forking costs more than it saves: the fork
@@ -196,12 +193,11 @@ class NumpyPPO:
         if self.actor.mu is not None:
             w_mu, b_mu = self.actor.mu  # W^T, b
             mu = h @ w_mu + b_mu
-            sigma = np.exp(self.actor.log_sigma)  # [1, c]
-            denom = 2 * sigma ** 2 + EPSILON
-            diff = batch["continuous_actions"] - mu
-            logp_parts.append(-(diff ** 2) / denom - np.log(sigma + EPSILON) - _LOG_SQRT_2PI)
-            ent = ent + np.mean(0.5 * np.log(_TWO_PI_E * sigma ** 2 + EPSILON))
-            back.append(("gaussian", diff, sigma, denom))
+            log_sigma = self.actor.log_sigma  # [1, c]
+            actions = batch["continuous_actions"]
+            logp_parts.append(nd.gaussian_log_prob(actions, mu, log_sigma))
+            ent = ent + np.mean(nd.gaussian_entropy(log_sigma))
+            back.append(("gaussian", actions, mu, log_sigma))
         allowed = batch.get("allowed")
         offsets = self.actor.offsets
         for index, (weight, bias) in enumerate(self.actor.branches):
@@ -209,15 +205,12 @@ class NumpyPPO:
             start, end = offsets[index], offsets[index + 1]
             a = allowed[:, start:end] if allowed is not None else None
             if a is not None:
-                logits = logits * a - MASKED_LOGIT_OFFSET * (1.0 - a)
-            z = np.exp(logits - logits.max(axis=1, keepdims=True))
-            probs = z / z.sum(axis=1, keepdims=True)
+                logits = nd.mask_logits(logits, a)
+            probs = nd.softmax(logits)
             action = batch["discrete_actions"][:, index]
-            chosen = probs[np.arange(n), action]
-            logp_parts.append(np.log(chosen + EPSILON)[:, None])
-            log_p = np.log(probs + EPSILON)
-            ent = ent - np.sum(probs * log_p, axis=1)
-            back.append(("categorical", index, probs, chosen, action, log_p, a))
+            logp_parts.append(nd.categorical_log_prob(probs, action)[:, None])
+            ent = ent + nd.categorical_entropy(probs)
+            back.append(("categorical", index, probs, action, a))
         log_probs = np.concatenate(logp_parts, axis=1)
         # ---- policy term
         advantages = batch["advantages"][:, None]
@@ -231,30 +224,24 @@ class NumpyPPO:
         column = 0
         for item in back:
             if item[0] == "gaussian":
-                _, diff, sigma, denom = item
-                c = diff.shape[1]
+                _, actions, mu, log_sigma = item
+                c = actions.shape[1]
                 g = grad_logp[:, column:column + c]
                 column += c
-                grad_mu = g * 2.0 * diff / denom
-                grad_ls = np.sum(g * (diff ** 2 * 4.0 * sigma ** 2 / denom ** 2 - sigma / (sigma + EPSILON)),
-                                 axis=0, keepdims=True)
-                grad_ls += -beta / c * (_TWO_PI_E * sigma ** 2 / (_TWO_PI_E * sigma ** 2 + EPSILON))
+                grad_mu, grad_ls = nd.gaussian_log_prob_grads(actions, mu, log_sigma, g)
+                grad_ls = np.sum(grad_ls, axis=0, keepdims=True)  # one log_sigma for all rows
+                grad_ls += -beta / c * nd.gaussian_entropy_grad(log_sigma)
                 w_mu, _ = self.actor.mu
                 grads[id(actor.mu.weight)] = (h.T @ grad_mu).T  # W^T contiguous, as stored
                 grads[id(actor.mu.bias)] = grad_mu.sum(axis=0)
                 grads[id(actor.log_sigma)] = grad_ls
                 grad_h += grad_mu @ w_mu.T
             else:
-                _, index, probs, chosen, action, log_p, a = item
+                _, index, probs, action, a = item
                 g = grad_logp[:, column]
                 column += 1
-                onehot = np.zeros_like(probs)
-                onehot[np.arange(n), action] = 1.0
-                grad_logits = (g * chosen / (chosen + EPSILON))[:, None] * (onehot - probs)
-                # entropy -sum p log(p + eps): d/dp_j = -log(p_j + eps) - p_j / (p_j + eps)
-                d_ent = -log_p - probs / (probs + EPSILON)
-                grad_ent = probs * (d_ent - np.sum(probs * d_ent, axis=1, keepdims=True))
-                grad_logits += (-beta / n) * grad_ent
+                grad_logits = nd.categorical_log_prob_grad(probs, action, g)
+                grad_logits += (-beta / n) * nd.categorical_entropy_grad(probs)
                 if a is not None:
                     grad_logits = grad_logits * a
                 weight, _ = self.actor.branches[index]

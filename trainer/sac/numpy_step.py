@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from trainer.common import numpy_distributions as nd
 from trainer.common import numpy_net
 from trainer.common.distributions import EPSILON
 from trainer.common.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN
@@ -135,10 +136,7 @@ class NumpySAC:
             sum_log_pi = _numpy_squashed_log_prob(raw, mu, log_sigma).sum(axis=1)
             alpha_c = np.exp(self.log_alpha_c)  # [1]
         if branches:
-            parts = []
-            for branch in logits:
-                z = np.exp(branch - branch.max(axis=1, keepdims=True))
-                parts.append(z / z.sum(axis=1, keepdims=True))
+            parts = [nd.softmax(branch) for branch in logits]
             probs = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
             log_probs = np.log(probs + EPSILON)
             alpha_d = np.exp(self.log_alpha_d)  # [B]

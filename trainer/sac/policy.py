@@ -17,18 +17,18 @@ import numpy as np
 import torch
 
 from protos.types import ActionTuple
+from trainer.common import numpy_distributions as nd
 from trainer.common.distributions import EPSILON
 from trainer.common.policy import Policy, PolicyOutput, allowed_from_mask
 from trainer.sac.losses import squashed_log_prob
 
-_HALF_LOG_2PI = 0.5 * np.log(2 * np.pi)
 _LOG_2 = np.log(2.0)
 
 
 def _numpy_squashed_log_prob(raw: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
-    """losses.squashed_log_prob in numpy. [n, c] -> [n, c]."""
-    sigma = np.exp(log_sigma)
-    gaussian = -((raw - mu) ** 2) / (2 * sigma**2 + EPSILON) - np.log(sigma + EPSILON) - _HALF_LOG_2PI
+    """losses.squashed_log_prob in numpy: the Gaussian's log-density less the tanh's log |Jacobian|
+    (float64, as SAC's numpy paths have always computed it). [n, c] -> [n, c]."""
+    gaussian = nd.gaussian_log_prob(raw, mu, log_sigma, float64_constant=True)
     return gaussian - 2.0 * (_LOG_2 - raw - np.logaddexp(0.0, -2.0 * raw))
 
 
@@ -37,9 +37,9 @@ def _entropy(n: int, log_sigma: np.ndarray | None, branch_probs: list[np.ndarray
     one has no closed form) plus each discrete branch's entropy."""
     entropy = np.zeros(n, dtype=np.float32)
     if log_sigma is not None:
-        entropy = entropy + np.mean(0.5 * np.log(2 * np.pi * np.e) + log_sigma, axis=1)
+        entropy = entropy + np.mean(nd.gaussian_entropy(log_sigma), axis=1)
     for probs in branch_probs:
-        entropy = entropy - (probs * np.log(probs + EPSILON)).sum(axis=1)
+        entropy = entropy + nd.categorical_entropy(probs)
     return entropy.astype(np.float32)
 
 

@@ -34,11 +34,23 @@ TASKS: dict[str, type[Task]] = {
 
 
 def make_task(name: str, num_areas: int = 1, seed: int = 0,
-              env_params: EnvironmentParameters | None = None) -> Task:
-    """Build the task ``name`` with ``num_areas`` areas; KeyError names the known tasks."""
+              env_params: EnvironmentParameters | None = None, agents_per_area: int | None = None) -> Task:
+    """Build the task ``name`` with ``num_areas`` areas; KeyError names the known tasks.
+
+    ``agents_per_area`` changes how many agents one area holds, for tasks whose agents never
+    interact (``Task.agents_interact`` False): ``ball3d`` with 1 is a single plate, the form a
+    single-agent Gymnasium env or a one-agent "build" needs. ValueError for the others."""
     if name not in TASKS:
         raise KeyError(f"Unknown task {name!r}; known tasks: {', '.join(sorted(TASKS))}")
-    return TASKS[name](num_areas=num_areas, seed=seed, env_params=env_params)
+    cls = TASKS[name]
+    if agents_per_area is not None and agents_per_area != cls.agents_per_area:
+        if cls.agents_interact:
+            raise ValueError(f"Task {name!r} has {cls.agents_per_area} agents per area that play together; "
+                             "its number of agents per area cannot change (change num_areas instead)")
+        if agents_per_area < 1:
+            raise ValueError(f"agents_per_area must be >= 1, got {agents_per_area}")
+        cls = type(cls.__name__, (cls,), {"agents_per_area": int(agents_per_area)})
+    return cls(num_areas=num_areas, seed=seed, env_params=env_params)
 
 
 __all__ = ["TASKS", "make_task", "Task", "TaskStep", "EnvironmentParameters", "BasicTask", "Ball3DTask", "DodgeTask", "CreatureTask",

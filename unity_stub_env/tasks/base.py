@@ -91,6 +91,9 @@ class Task:
     observation_compressions: tuple[str, ...] | None = None
     action_spec: ActionSpec = ActionSpec(0, ())
     agents_per_area: int = 1
+    # True: the agents of an area play together (teams, groups), so an area's agent count is fixed;
+    # False: they are independent copies, and ``make_task(agents_per_area=...)`` may change it
+    agents_interact: bool = False
     max_step: int = 0
     decision_period: int = 1
     # True: the per-decision reward is the LAST step's reward (Unity's SetReward every step);

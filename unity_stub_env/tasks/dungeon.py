@@ -101,6 +101,7 @@ class DungeonTask(Task):
     )
     action_spec = ActionSpec(continuous_size=0, discrete_branches=(5,))
     agents_per_area = AGENTS
+    agents_interact = True
     max_step = MAX_STEP
     decision_period = 1
     sets_reward = False

@@ -136,6 +136,7 @@ class SoccerTask(Task):
     observation_specs = _vector_spec(12)
     action_spec = ActionSpec(continuous_size=0, discrete_branches=(3, 3))
     agents_per_area = TEAMS * players_per_team
+    agents_interact = True
     max_step = MAX_STEP
     decision_period = 5
     sets_reward = False

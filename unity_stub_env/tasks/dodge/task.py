@@ -257,6 +257,7 @@ class DodgeTask(Task):
         self._start_pose_geometry()
         # per-agent state
         self.crouch = np.zeros(n)
+        self.aim = np.zeros((n, 3))  # the world point each sphere was thrown at (drawn by unity_stub_env.render)
         self.euler = np.zeros((n, 2, 3))  # torso, neck joint angles
         self.com = np.zeros((n, 2))  # CoM projection relative to the base
         self.episode_step = np.zeros(n, dtype=np.int64)
@@ -333,6 +334,7 @@ class DodgeTask(Task):
         velocity[:, 2] += 0.5 * self.gravity * (flight + self.timestep)
         qpos, qvel = self.data.qpos, self.data.qvel
         qpos[self.ball_pos_qpos[agents]] = self.base[agents] + throws.start
+        self.aim[agents] = self.base[agents] + throws.target
         qpos[self.ball_quat_qpos[agents]] = (1.0, 0.0, 0.0, 0.0)
         qvel[self.ball_dof[agents]] = 0.0
         qvel[self.ball_lin_dof[agents]] = velocity

@@ -23,11 +23,17 @@ reference on their own is the row "reference PD" of ``unity-stub-env --task mimi
 Ragdolls never touch each other (collision bits: ragdoll geoms only meet the floor) and have no
 self-collision, so one MjModel holds all ``num_areas * 8`` of them.
 
-Control: MuJoCo steps of 0.004 s (250 Hz, the seed's physics and PD rate), one action every 5 of
-them: 50 decisions per second, not the seed's 250. Why: the PD loop still runs at 250 Hz inside
-MuJoCo, and at 250 decisions/s a 10 s episode is 2,500 agent steps, so the few hundred thousand
-steps a bench run affords on this machine would be ~100 episodes; DeepMimic itself decides at
-30 Hz over a 1.2 kHz simulation. Episodes are interrupted after max_step = 500 decisions (10 s).
+Control: MuJoCo steps of 0.004 s (250 Hz, the seed's physics and PD rate); the environment
+parameter ``decision_hz`` (read when every agent resets together, i.e. at a RESET; 250 Hz must be
+a multiple of it and every clip a whole number of decisions long: 50 or 250) sets how many of them
+one decision spans: 250 = the seed's rate, one action per MuJoCo step; 50 (default) = one action
+every 5. Why 50 by default: the PD loop runs at 250 Hz inside MuJoCo either way; an untrained
+policy's noise topples the ragdoll no later at 50 than at 250 decisions/s (bench/RESULTS.md,
+"mimic: decision rate"), and at 250 a 10 s episode is 2,500 agent steps instead of 500, so the same
+agent-step budget buys a fifth of the simulated time; DeepMimic itself decides at 30 Hz over a
+1.2 kHz simulation. Episodes are interrupted after 10 s (``max_step`` = 10 s x decision_hz). The
+reference clips (50 Hz) are resampled to the decision rate (``resample``). The trainer's horizon
+and discount are per decision: configs/mimic.yaml says how to restate them for a rate.
 
 Actions, 26 continuous in [-1, 1], one per axis in mimic.xml's actuator order (``JOINTS`` of
 ``motions``). Environment parameter ``residual`` (read at episode start):
@@ -67,6 +73,10 @@ Reward (DeepMimic-style, each decision, against the reference frame reached by t
   r_m = exp(-k_m |m - m^|^2)                 centre of mass (world)
   r_e = exp(-k_e sum_e |p_e - p^_e|^2)       hands and feet (world; geom centres)
   r_t = exp(-k_t (v_y - v^_y)^2)             forward pelvis velocity against the clip's mean speed
+Effort (environment parameter ``effort_weight`` w_f in [0, 1], default 0 = off): R is multiplied by
+1 - w_f f, f = the mean over the 26 actuators and the decision's MuJoCo steps of |torque| / its
+force limit, so the less relative force the ragdoll spends the closer the factor is to 1 (the seed's
+effort multiplier, whose coefficient it does not give).
 Weights (environment parameter ``reward_weights``): 0 = the seed's (per motion, as its tables give
 them: stand and arms w_r 0.7, w_v 0.15, w_m 0.15; squat 0.65, 0.1, 0.1, w_e 0.15; walk 0.56,
 0.07, 0.07, 0.1, w_t 0.2), 1 = DeepMimic's (pose 0.65, velocity 0.1, end effectors 0.15, CoM 0.1).
@@ -79,7 +89,7 @@ and velocities copied into the ragdoll; 0: frame 0). Early termination: a geom o
 touches the floor, or the centre of mass is more than ``max_drift`` (default 0.5 m) from the
 reference's. Optional pushes: every ``push_interval`` s (default 2) of an episode, when
 ``push_impulse`` (N s, default 0 = none) is positive, the torso gets that horizontal impulse in a
-random direction, as a constant force over one decision (0.02 s).
+random direction, as a constant force over one decision (1 / decision_hz s).
 Stats: Mimic/r_r, r_v, r_m, r_e (episode means) and Mimic/Fell, at each episode's end.
 """
 from __future__ import annotations
@@ -105,8 +115,11 @@ XML_PATH = Path(__file__).with_name("mimic.xml")
 AGENTS_PER_AREA = 8
 AGENT_SPACING = 2.0  # m between the ragdolls of an area (x); areas 4 m apart (y). They never collide.
 AREA_SPACING = 4.0
-SUBSTEPS = 5  # MuJoCo steps of 0.004 s per decision: 50 Hz
-CONTROL_DT = 1.0 / RATE
+PHYSICS_HZ = 250  # mimic.xml's timestep, 0.004 s
+DECISION_HZ = 50  # the default of the environment parameter decision_hz (see the module docstring)
+SUBSTEPS = PHYSICS_HZ // DECISION_HZ  # MuJoCo steps per decision at the default rate
+CONTROL_DT = 1.0 / DECISION_HZ  # s per decision at the default rate
+EPISODE_SECONDS = 10.0  # episodes are interrupted after this much simulated time
 OBSERVED = ("pelvis", "torso", "head", "upper_arm_r", "forearm_r", "upper_arm_l", "forearm_l",
             "thigh_r", "shank_r", "foot_r", "thigh_l", "shank_l", "foot_l")
 END_EFFECTORS = ("hand_r", "hand_l", "foot_r", "foot_l")  # geoms
@@ -119,6 +132,18 @@ DEEPMIMIC_WEIGHTS = (0.65, 0.1, 0.1, 0.15, 0.0)  # in TERMS order: pose, velocit
 SCALES = (2.0, 0.1, 10.0, 40.0, 2.0)  # k_r, k_v, k_m, k_e, k_t
 MAX_DRIFT = 0.5
 PUSH_INTERVAL = 2.0
+
+
+def check_decision_hz(hz: float) -> int:
+    """``hz`` as an int if MuJoCo's 250 Hz divides into it and every clip lasts a whole number of
+    decisions at it (50 and 250 do; so do 10 and 25 for some clips, not all), else ValueError."""
+    rate = int(round(hz))
+    durations = [load_motion(name).frames / RATE for name in MOTIONS]
+    if (rate <= 0 or abs(hz - rate) > 1e-9 or PHYSICS_HZ % rate
+            or any(abs(d * rate - round(d * rate)) > 1e-9 for d in durations)):
+        raise ValueError(f"environment parameter decision_hz must divide {PHYSICS_HZ} and fit every clip "
+                         f"(e.g. 50 or 250), got {hz:g}")
+    return rate
 
 
 def reward_terms(rot_sq: np.ndarray, vel_sq: np.ndarray, com_sq: np.ndarray, end_sq: np.ndarray,
@@ -142,13 +167,42 @@ def build_model(num_agents: int) -> tuple[mujoco.MjModel, np.ndarray]:
     return spec.compile(), base
 
 
-class Reference:
-    """Every motion's frames and what the reward and RSI need of them, concatenated over MOTIONS
-    (``offset[m]``, ``frames[m]``): qpos [F, 33], qvel [F, 32], local part rotations [F, 13, 4],
-    CoM [F, 3] and end effectors [F, 4, 3] relative to the reference root's horizontal position,
-    joint-velocity vector [F, 29] (26 joints + root angular), the walk's stride and mean speed."""
+def resample(q: np.ndarray, stride: float, factor: int) -> np.ndarray:
+    """A looping clip's qpos [F, 33] at ``factor`` times its rate [F * factor, 33]: positions and
+    joint angles interpolated linearly between neighbouring frames, the root quaternion normalised
+    after the same interpolation; the frame after the last is the first, advanced by ``stride``."""
+    if factor == 1:
+        return q
+    following = np.roll(q, -1, axis=0)
+    following[-1, 1] += stride
+    t = (np.arange(factor) / factor)[None, :, None]
+    out = ((1.0 - t) * q[:, None, :] + t * following[:, None, :]).reshape(-1, q.shape[1])
+    out[:, 3:7] /= np.linalg.norm(out[:, 3:7], axis=1, keepdims=True)
+    return out
 
-    def __init__(self) -> None:
+
+class Reference:
+    """Every motion's frames at one decision rate and what the reward and RSI need of them,
+    concatenated over MOTIONS (``offset[m]``, ``frames[m]``): qpos [F, 33], qvel [F, 32], local part
+    rotations [F, 13, 4], CoM [F, 3] and end effectors [F, 4, 3] relative to the reference root's
+    horizontal position, joint-velocity vector [F, 29] (26 joints + root angular), the walk's stride
+    and mean speed. The clips (50 Hz) are resampled to ``decision_hz`` (``resample``)."""
+
+    _cache: dict[int, "Reference"] = {}
+
+    @classmethod
+    def at(cls, decision_hz: int) -> "Reference":
+        """The tables at ``decision_hz``, built once per process and rate."""
+        if decision_hz not in cls._cache:
+            cls._cache[decision_hz] = cls(decision_hz)
+        return cls._cache[decision_hz]
+
+    def __init__(self, decision_hz: int = DECISION_HZ) -> None:
+        factor = check_decision_hz(decision_hz) // RATE if decision_hz >= RATE else 0
+        if factor == 0 or decision_hz % RATE:
+            raise ValueError(f"decision_hz {decision_hz}: the reference clips ({RATE} Hz) are only resampled "
+                             f"to multiples of {RATE} Hz")
+        dt = 1.0 / decision_hz
         model = mujoco.MjModel.from_xml_path(str(XML_PATH))
         data = mujoco.MjData(model)
         parts = [model.body(name).id for name in OBSERVED]
@@ -158,16 +212,17 @@ class Reference:
         qpos, qvel, rot, com, end, speed, frames, offset, stride = [], [], [], [], [], [], [], [], []
         for name in MOTIONS:
             q = load_motion(name).qpos
-            count = len(q)
             # the walk advances by one stride per loop: its last advance plus one more frame's
             stride.append(2 * q[-1, 1] - q[-2, 1] if name == "walk" else 0.0)
+            q = resample(q, stride[-1], factor)
+            count = len(q)
             after = q[np.arange(1, count + 1) % count].copy()
             before = q[np.arange(-1, count - 1) % count].copy()
             after[-1, 1] += stride[-1]
             before[0, 1] -= stride[-1]
             v = np.zeros((count, model.nv))
             for k in range(count):
-                mujoco.mj_differentiatePos(model, v[k], 2 * CONTROL_DT, before[k], after[k])
+                mujoco.mj_differentiatePos(model, v[k], 2 * dt, before[k], after[k])
             for k in range(count):
                 data.qpos[:] = q[k]
                 data.qvel[:] = v[k]
@@ -184,13 +239,14 @@ class Reference:
             qvel.append(v)
             offset.append(sum(frames))
             frames.append(count)
-            speed.append(stride[-1] / (count * CONTROL_DT))
+            speed.append(stride[-1] / (count * dt))
         self.qpos, self.qvel = np.concatenate(qpos), np.concatenate(qvel)
         self.rot, self.com, self.end = np.array(rot), np.array(com), np.array(end)
         self.joint_vel = np.concatenate([self.qvel[:, joint_dof], self.qvel[:, 3:6]], axis=1)
         self.frames, self.offset = np.array(frames), np.array(offset)
         self.stride, self.speed = np.array(stride), np.array(speed)
         self.joints = self.qpos[:, 7:]
+        self.decision_hz = decision_hz
 
 
 class MimicTask(Task):
@@ -202,13 +258,14 @@ class MimicTask(Task):
     )
     action_spec = ActionSpec(continuous_size=len(JOINTS), discrete_branches=())
     agents_per_area = AGENTS_PER_AREA
-    max_step = 500
+    max_step = round(EPISODE_SECONDS * DECISION_HZ)  # instances: EPISODE_SECONDS at their decision_hz
     decision_period = 1
     sets_reward = False
     description = ("PD-controlled ragdoll imitating a reference motion (docs/stub-tasks.md). Observations: 13 parts x "
                    "(local rotation 4, linear velocity 3, angular velocity 3, position from the pelvis 3) + "
                    "phase (1). Actions: 26 PD targets. DeepMimic-style reward; env params motion (0 stand, "
-                   "1 arms, 2 squat, 3 walk), residual, push_impulse, push_interval, reward_weights, rsi.")
+                   "1 arms, 2 squat, 3 walk), decision_hz, effort_weight, residual, push_impulse, push_interval, "
+                   "reward_weights, rsi.")
 
     def __init__(self, num_areas: int, seed: int, env_params: EnvironmentParameters | None = None):
         super().__init__(num_areas, seed, env_params)
@@ -216,7 +273,7 @@ class MimicTask(Task):
         self.model, self.base = build_model(n)
         self.data = mujoco.MjData(self.model)
         self.rng = np.random.default_rng(self.seed)
-        self.ref = Reference()
+        self.set_decision_hz(DECISION_HZ)
         model = self.model
         self.timestep = float(model.opt.timestep)
         joint = lambda i, name: model.joint(f"a{i}/{name}")  # noqa: E731
@@ -236,6 +293,7 @@ class MimicTask(Task):
         self.low = model.jnt_range[[[joint(i, j).id for j in JOINTS] for i in range(n)], 0]
         self.high = model.jnt_range[[[joint(i, j).id for j in JOINTS] for i in range(n)], 1]
         self.floor = model.geom("floor").id
+        self.force_limit = model.actuator_forcerange[self.actuator, 1]  # [n, 26] N m
         # per geom: owning agent (-1 = floor); feet may touch the floor
         self.geom_agent = np.full(model.ngeom, -1)
         self.geom_is_foot = np.zeros(model.ngeom, dtype=bool)
@@ -255,11 +313,21 @@ class MimicTask(Task):
         self.push_impulse = np.zeros(n)
         self.push_interval = np.full(n, PUSH_INTERVAL)
         self.max_drift = np.full(n, MAX_DRIFT)
+        self.effort_weight = np.zeros(n)
+        self.last_effort = np.zeros(n)  # the mean relative actuator force of the last decision (0 if no effort_weight)
         self.term_sum = np.zeros((n, 5))
         self.last_terms = np.zeros((n, 5))
         self.last_fell = np.zeros(n, dtype=bool)
         self.last_push = np.zeros((n, 3))  # the impulse (N s) applied in the last decision
         self.reset()
+
+    def set_decision_hz(self, hz: float) -> None:
+        """Decide ``hz`` times per simulated second: the MuJoCo steps per decision, max_step (10 s)
+        and the reference tables follow."""
+        rate = check_decision_hz(hz)
+        self.decision_hz, self.substeps, self.control_dt = rate, PHYSICS_HZ // rate, 1.0 / rate
+        self.max_step = round(EPISODE_SECONDS * rate)
+        self.ref = Reference.at(rate)
 
     # --- reference lookups -------------------------------------------------------------------
     def ref_rows(self, frame: np.ndarray | None = None) -> np.ndarray:
@@ -281,6 +349,12 @@ class MimicTask(Task):
         if len(agents) == 0:
             return
         count, get = len(agents), self.env_params.get_many
+        hz = self.env_params.get("decision_hz", DECISION_HZ)
+        if mask is None:  # every agent restarts together: the rate may change (one MuJoCo step for all)
+            self.set_decision_hz(hz)
+        elif round(hz) != self.decision_hz:
+            raise ValueError(f"environment parameter decision_hz changed from {self.decision_hz} to {hz:g} "
+                             "between episodes; it is read when every agent resets together (a RESET)")
         motion = np.rint(get("motion", 0, count)).astype(np.int64)
         if ((motion < 0) | (motion >= len(MOTIONS))).any():
             raise ValueError(f"environment parameter motion must be 0..{len(MOTIONS) - 1} "
@@ -302,7 +376,8 @@ class MimicTask(Task):
         self.weights[agents], self.scales[agents] = weights, scales
         self.residual[agents] = np.maximum(get("residual", 0, count), 0.0)
         self.push_impulse[agents] = np.maximum(get("push_impulse", 0, count), 0.0)
-        self.push_interval[agents] = np.maximum(get("push_interval", PUSH_INTERVAL, count), CONTROL_DT)
+        self.push_interval[agents] = np.maximum(get("push_interval", PUSH_INTERVAL, count), self.control_dt)
+        self.effort_weight[agents] = np.clip(get("effort_weight", 0.0, count), 0.0, 1.0)
         self.max_drift[agents] = get("max_drift", MAX_DRIFT, count)
         rows = self.ref.offset[motion] + self.frame[agents]
         qpos = self.ref.qpos[rows].copy()
@@ -361,23 +436,29 @@ class MimicTask(Task):
         return [np.concatenate([obs, phase[:, None]], axis=1).astype(np.float32)]
 
     def step(self, continuous: np.ndarray, discrete: np.ndarray) -> TaskStep:
-        """continuous float [n, 26] in [-1, 1] -> one decision (5 MuJoCo steps, 0.02 s) of every agent."""
+        """continuous float [n, 26] in [-1, 1] -> one decision (250 / decision_hz MuJoCo steps) of every agent."""
         n, data = self.num_agents, self.data
         action = np.asarray(continuous, dtype=np.float64).reshape(n, len(JOINTS)).clip(-1.0, 1.0)
         data.ctrl[self.actuator] = self.targets(action)
         # pushes: at every multiple of push_interval seconds into the episode
-        elapsed = (self.episode_step + 1) * CONTROL_DT
+        dt = self.control_dt
+        elapsed = (self.episode_step + 1) * dt
         due = (self.push_impulse > 0) & (np.floor(elapsed / self.push_interval + 1e-9)
-                                         > np.floor((elapsed - CONTROL_DT) / self.push_interval + 1e-9))
+                                         > np.floor((elapsed - dt) / self.push_interval + 1e-9))
         self.last_push[:] = 0.0
         if due.any():
             azimuth = self.rng.uniform(0.0, 2 * math.pi, int(due.sum()))
             impulse = self.push_impulse[due, None] * np.column_stack([np.cos(azimuth), np.sin(azimuth),
                                                                       np.zeros(len(azimuth))])
             self.last_push[due] = impulse
-            data.xfrc_applied[self.torso[due], :3] = impulse / CONTROL_DT
-        for _ in range(SUBSTEPS):
+            data.xfrc_applied[self.torso[due], :3] = impulse / dt
+        measure = bool(self.effort_weight.any())  # the effort costs a gather per MuJoCo step: only when used
+        force = np.zeros(n)
+        for _ in range(self.substeps):
             mujoco.mj_step(self.model, data)
+            if measure:
+                force += (np.abs(data.actuator_force[self.actuator]) / self.force_limit).mean(axis=1)
+        self.last_effort = force / self.substeps
         if due.any():
             data.xfrc_applied[self.torso[due], :3] = 0.0
         # advance the reference
@@ -386,7 +467,7 @@ class MimicTask(Task):
         self.frame[self.frame >= frames] = 0
         rows = self.ref_rows()
         terms, drift = self.compare(rows)
-        rewards = (self.weights * terms).sum(axis=1)
+        rewards = (self.weights * terms).sum(axis=1) * (1.0 - self.effort_weight * self.last_effort)
         fell = self._fallen() | (drift > self.max_drift)
         self.episode_step += 1
         self.term_sum += terms

@@ -1,5 +1,6 @@
-"""``creature``: a generated creature learns to walk to targets over generated terrain (the creature
-report: docs/stub-tasks.md, "Seed projects").
+"""``creature``: a generated creature learns to walk to targets over generated terrain (the task;
+``terrain.py`` draws the heightfields, ``evaluation.py`` measures a policy; the creature report it
+follows: docs/stub-tasks.md, "Seed projects").
 
 One agent per area. Each area is an arena: a 20 m x 20 m heightfield (flat, or Perlin noise whose
 height is set by the roughness), four walls 1 m high, optional box obstacles, and a target; the
@@ -74,6 +75,7 @@ from unity_stub_env.creatures import generate, mjcf
 from unity_stub_env.creatures.skeleton import Skeleton
 from unity_stub_env.geometry import matrix_quat
 from unity_stub_env.tasks.base import EnvironmentParameters, Task, TaskStep
+from unity_stub_env.tasks.creature.terrain import NOISE_CELL, perlin
 
 KINDS = ("quadruped", "biped", "lsystem")
 ARENA_HALF = 10.0  # m, half the side of the arena (the heightfield's half extent)
@@ -83,8 +85,6 @@ WALL_THICKNESS = 0.2
 HFIELD_SIZE = 81  # rows = columns of the heightfield grid (0.25 m cells)
 MAX_TERRAIN_HEIGHT = 0.6  # m at roughness 1
 HFIELD_BASE = 0.5
-NOISE_CELL = 4.0  # m, the period of the coarsest noise octave
-NOISE_OCTAVES = 3
 MAX_OBSTACLES = 6
 TARGET_RANGE = 8.0
 TARGET_MIN_DISTANCE = 4.0
@@ -97,34 +97,6 @@ VITAL = ("torso", "hip", "shoulder", "neck", "head")
 DEFAULTS = {"creature_kind": 0.0, "creature_seed": 0.0, "terrain_roughness": 0.0, "obstacles": 0.0,
             "target_speed": 1.0}
 PARK = np.array([0.0, 0.0, -10.0])  # where unused obstacles wait (below every heightfield)
-
-
-def perlin(shape: tuple[int, int], cells: float, rng: np.random.Generator, octaves: int = NOISE_OCTAVES) -> np.ndarray:
-    """Seeded 2-D gradient (Perlin) noise on a ``shape`` grid, rescaled to [0, 1].
-
-    Octave k has a lattice of period ``cells / 2**k`` grid samples, unit gradients at uniform random
-    angles on the lattice points, Perlin's fade 6t^5 - 15t^4 + 10t^3 and amplitude 2**-k. The sum
-    is rescaled to [0, 1] by its minimum and maximum (all zeros if it is constant)."""
-    rows, cols = shape
-    total = np.zeros(shape)
-    for k in range(octaves):
-        period = cells / 2**k
-        y, x = np.meshgrid(np.arange(rows) / period, np.arange(cols) / period, indexing="ij")
-        angles = rng.uniform(0.0, 2 * np.pi, (int(y.max()) + 2, int(x.max()) + 2))
-        gx, gy = np.cos(angles), np.sin(angles)
-        x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
-        fx, fy = x - x0, y - y0
-
-        def corner(dx: int, dy: int) -> np.ndarray:
-            return gx[y0 + dy, x0 + dx] * (fx - dx) + gy[y0 + dy, x0 + dx] * (fy - dy)
-
-        u = fx**3 * (fx * (6 * fx - 15) + 10)
-        v = fy**3 * (fy * (6 * fy - 15) + 10)
-        bottom = corner(0, 0) + u * (corner(1, 0) - corner(0, 0))
-        top = corner(0, 1) + u * (corner(1, 1) - corner(0, 1))
-        total += (bottom + v * (top - bottom)) / 2**k
-    span = total.max() - total.min()
-    return (total - total.min()) / span if span > 0 else np.zeros(shape)
 
 
 def match_speed_reward(goal_velocity: np.ndarray, velocity: np.ndarray, speed: np.ndarray) -> np.ndarray:
@@ -173,8 +145,13 @@ def arena_xml(skeleton: Skeleton, num_areas: int) -> str:
             + "  </actuator>\n</mujoco>\n")
 
 
+def observation_size(skeleton: Skeleton) -> int:
+    """The observation's length for ``skeleton``: 14 + 10 per bone + 1 per hinge (module docstring)."""
+    return 14 + 10 * len(skeleton.bones) + skeleton.num_hinges()
+
+
 def _specs(skeleton: Skeleton) -> tuple[tuple[ObservationSpec, ...], ActionSpec]:
-    size = 14 + 10 * len(skeleton.bones) + skeleton.num_hinges()
+    size = observation_size(skeleton)
     return ((ObservationSpec((size,), (DimensionProperty.NONE,), ObservationType.DEFAULT, f"VectorSensor_size{size}"),),
             ActionSpec(continuous_size=skeleton.num_hinges(), discrete_branches=()))
 
@@ -412,28 +389,3 @@ class CreatureTask(Task):
             for name, values in (("Creature/Targets Reached", self.targets_reached), ("Creature/Distance", self.distance)):
                 stats += [(name, float(v), StatsAggregationMethod.AVERAGE) for v in values[done].tolist()]
         return TaskStep(rewards, done, interrupted, stats)
-
-
-def run_policy(task: CreatureTask, act, control_steps: int) -> dict:
-    """Run ``act`` (float32 obs [n, size] -> actions [n, J]) on every agent for ``control_steps``,
-    restarting finished episodes. Per minute of simulated time per agent: targets reached, the
-    CoM's horizontal path length (``distance``), its progress towards the target (the decrease of
-    its horizontal distance to the target of that step; a walker covers it, a faller only lunges)
-    and falls (episodes ended by a vital contact); and the mean reward per step."""
-    n = task.num_agents
-    reached = distance = progress = falls = reward = 0.0
-    for _ in range(control_steps):
-        before_reached, before_distance = task.targets_reached.copy(), task.distance.copy()
-        target, com = task.target[:, :2].copy(), task.data.subtree_com[task.root, :2].copy()
-        result = task.step(act(task.observe()[0]), np.zeros((n, 0)))
-        after = task.data.subtree_com[task.root, :2]
-        progress += float((np.linalg.norm(target - com, axis=1) - np.linalg.norm(target - after, axis=1)).sum())
-        reached += float((task.targets_reached - before_reached).sum())
-        distance += float((task.distance - before_distance).sum())
-        falls += float((result.done & ~result.interrupted).sum())
-        reward += float(result.rewards.sum())
-        task.reset(result.done)
-    minutes = control_steps * task.control_dt / 60.0 * n
-    return {"agent_minutes": minutes, "targets_per_minute": reached / minutes, "distance_per_minute": distance / minutes,
-            "progress_per_minute": progress / minutes, "falls_per_minute": falls / minutes,
-            "mean_reward": reward / (control_steps * n)}

@@ -1,6 +1,6 @@
 """Write the runner's corpora and train its six HMMs (the files beside this script).
 
-    python -m unity_stub_env.tasks.runner_data.make_models          # rewrites *.txt and *.json
+    python -m unity_stub_env.tasks.runner.data.make_models          # rewrites *.txt and *.json
 
 The corpora are written from hand-made phrases, one list per zone (below): a line of a corpus
 is a random chain of that zone's phrases (seeded, so the files are reproducible). Each model is
@@ -13,10 +13,14 @@ thesis, docs/stub-tasks.md, "Seed projects"):
   urban  - city blocks: a few straights, then one right-angle turn; never two turns in a row.
   rural  - a winding road: S-bends (a turn one way, maybe a straight, the other way back).
   desert - long straights with a rare single turn.
-Prop corpora: three labels per platform, its spawn points filled left to right (clockwise seen
-from above, starting at the left edge); ``-`` is the epsilon label, an empty spawn point.
-Obstacles (the zone's scenery) cost the agent when it drives into them; ``coin`` rewards it.
-The phrases never block all three lanes of a platform. The largest prop model has 8 states.
+Prop corpora: the labels of one platform's spawn points, filled left to right (clockwise seen
+from above, starting at the left edge), a stackable spawn point taking as many labels as it holds
+objects at most, bottom first (``runner.SPAWN_STACKS``: urban 1, 2, 1; rural 2, 1, 2; desert 1, 1, 3
+labels, so 4, 5 and 5 labels per platform); ``-`` is the epsilon label, an empty place. Obstacles
+(the zone's scenery) cost the agent when it drives into them; ``coin`` rewards it. The phrases
+never block all three lanes of a platform. Sizes as the seed's generators: its largest has 20
+states and 10 labels (urban props here: 10 labels, 20 states); rural 8 labels, 16 states; desert
+7 labels, 14 states; the platform models 5 states over 3 labels.
 """
 from __future__ import annotations
 
@@ -37,17 +41,21 @@ PLATFORM_PHRASES = {
     "desert": ["Straight Straight Straight Straight", "Straight Straight Straight", "Straight Left Straight",
                "Straight Right Straight"],
 }
-# one phrase = the spawn points of one or two platforms (3 labels each)
+# one phrase = the labels of one or two platforms (urban 4, rural 5, desert 5 labels each: left,
+# centre, right, a stackable spawn point's places bottom first); a stack ends at its first '-'
 PROP_PHRASES = {
-    "urban": ["- - -", "- - -", "car - -", "- - car", "- hydrant -", "coin - -", "- coin -", "- - coin",
-              "car - - - coin -", "- - hydrant coin - -"],
-    "rural": ["- - -", "- - -", "- - -", "hay - -", "- - fence", "- hay -", "- coin -", "coin coin -",
-              "fence - - - - hay"],
-    "desert": ["- - -", "- - -", "- - -", "- - -", "cactus - -", "- - rock", "- cactus -", "- - coin",
-               "rock - coin", "- coin -"],
+    "urban": ["- - - -", "- - - -", "car - - -", "- - - car", "- hydrant - -", "- crate crate -",
+              "coin - - -", "- coin coin -", "- - - coin", "- bench - -", "bin - - -", "- - - lamp",
+              "- cone cone -", "- - - mailbox", "car - - - - coin - -", "- - - hydrant coin - - -", "- crate - - bin - - -"],
+    "rural": ["- - - - -", "- - - - -", "hay hay - - -", "- - - fence -", "- - tractor - -",
+              "coin - - - -", "- - coin - -", "- - - coin coin", "barrel - - - -", "- - - hay hay", "- - log - -", "sheep - - - -",
+              "fence - - - - - - - hay -"],
+    "desert": ["- - - - -", "- - - - -", "- - - - -", "cactus - - - -", "- - rock rock -", "- skull - - -",
+               "- - - - -", "- - coin - -", "rock - coin - -", "- coin - - -", "- - bones - -",
+               "- tumbleweed - - -", "- - rock rock rock"],
 }
 PLATFORM_STATES = 5
-PROP_STATES = 8
+PROP_STATES = {"urban": 20, "rural": 16, "desert": 14}
 LINES, PHRASES_PER_LINE = 60, 12
 
 
@@ -66,7 +74,8 @@ def build(folder: str = HERE) -> None:
             with open(os.path.join(folder, name + ".txt"), "w", encoding="utf-8") as out:
                 out.write(f"# {name}: written by make_models.py from hand-made phrases (see its docstring)\n")
                 out.write(text)
-            model = train(parse_corpus(text, name), num_states=states, restarts=5, method="fast", seed=0)
+            count = states[zone] if isinstance(states, dict) else states
+            model = train(parse_corpus(text, name), num_states=count, restarts=5, method="fast", seed=0)
             model.save(os.path.join(folder, name + ".json"))
             print(f"{name}: {len(text.split())} labels, log-likelihood {model.training['log_likelihood']:.1f}")
 

@@ -1,0 +1,89 @@
+"""trainer/common/numpy_distributions.py against trainer/common/distributions.py: every value
+equal to the torch function's in float32 (sums within their rounding), every gradient equal to
+autograd's, on random inputs with masked options, and the entropies by hand."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from trainer.common import distributions as td
+from trainer.common import numpy_distributions as nd
+
+RNG = np.random.default_rng(7)
+N, C, K = 9, 3, 4
+
+
+def arrays():
+    actions = RNG.standard_normal((N, C)).astype(np.float32)
+    mu = RNG.standard_normal((N, C)).astype(np.float32)
+    log_sigma = (RNG.standard_normal((1, C)) * 0.5).astype(np.float32)
+    logits = RNG.standard_normal((N, K)).astype(np.float32)
+    allowed = (RNG.random((N, K)) > 0.3).astype(np.float32)
+    allowed[:, 0] = 1.0  # at least one option allowed per row
+    choice = np.array([RNG.choice(np.flatnonzero(row)) for row in allowed])
+    return actions, mu, log_sigma, logits, allowed, choice
+
+
+def t(a):
+    return torch.tensor(a)
+
+
+def test_the_names_mirror_distributions_py():
+    torch_names = {name for name in dir(td) if not name.startswith("_") and callable(getattr(td, name))
+                   and getattr(td, name).__module__ == td.__name__}
+    assert torch_names - {"combined_entropy"} <= set(nd.__all__)
+    assert nd.EPSILON == td.EPSILON and nd.MASKED_LOGIT_OFFSET == td.MASKED_LOGIT_OFFSET
+
+
+def test_values_equal_the_torch_functions():
+    actions, mu, log_sigma, logits, allowed, choice = arrays()
+    np.testing.assert_array_equal(nd.gaussian_log_prob(actions, mu, log_sigma),
+                                  td.gaussian_log_prob(t(actions), t(mu), t(log_sigma)).numpy())
+    np.testing.assert_allclose(nd.gaussian_log_prob(actions, mu, log_sigma, float64_constant=True),
+                               nd.gaussian_log_prob(actions, mu, log_sigma), rtol=1e-6)
+    np.testing.assert_array_equal(nd.gaussian_entropy(log_sigma), td.gaussian_entropy(t(log_sigma)).numpy())
+    masked = nd.mask_logits(logits, allowed)
+    np.testing.assert_array_equal(masked, td.mask_logits(t(logits), t(allowed)).numpy())
+    probs = nd.softmax(masked)
+    np.testing.assert_allclose(probs, torch.softmax(t(masked), dim=1).numpy(), rtol=1e-6, atol=1e-7)
+    np.testing.assert_array_equal(nd.categorical_log_prob(probs, choice),
+                                  td.categorical_log_prob(t(probs), t(choice)).numpy())
+    # a sum over the options: numpy and torch add in another order (one float32 rounding apart)
+    np.testing.assert_allclose(nd.categorical_entropy(probs), td.categorical_entropy(t(probs)).numpy(), rtol=3e-7)
+
+
+def test_entropies_by_hand():
+    # sigma = 1: 0.5 log(2 pi e); uniform over 4 options: log 4 (both up to the 1e-7 inside the log)
+    assert nd.gaussian_entropy(np.zeros((1, 1), np.float32))[0, 0] == pytest.approx(
+        0.5 * math.log(2 * math.pi * math.e), abs=1e-6)
+    assert nd.categorical_entropy(np.full((1, 4), 0.25, np.float32))[0] == pytest.approx(math.log(4), abs=1e-6)
+
+
+def test_gradients_equal_autograd():
+    actions, mu, log_sigma, logits, allowed, choice = arrays()
+    grad_out = RNG.standard_normal((N, C)).astype(np.float32)
+    mu_t, ls_t = t(mu).requires_grad_(), t(log_sigma).requires_grad_()
+    (td.gaussian_log_prob(t(actions), mu_t, ls_t) * t(grad_out)).sum().backward()
+    grad_mu, grad_ls = nd.gaussian_log_prob_grads(actions, mu, log_sigma, grad_out)
+    np.testing.assert_allclose(grad_mu, mu_t.grad.numpy(), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(grad_ls.sum(axis=0, keepdims=True), ls_t.grad.numpy(), rtol=1e-5, atol=1e-6)
+
+    ls_t = t(log_sigma).requires_grad_()
+    td.gaussian_entropy(ls_t).sum().backward()
+    np.testing.assert_allclose(nd.gaussian_entropy_grad(log_sigma), ls_t.grad.numpy(), rtol=1e-6)
+
+    grad_lp = RNG.standard_normal(N).astype(np.float32)
+    logits_t = t(logits).requires_grad_()
+    probs_t = torch.softmax(td.mask_logits(logits_t, t(allowed)), dim=1)
+    (td.categorical_log_prob(probs_t, t(choice)) * t(grad_lp)).sum().backward()
+    probs = nd.softmax(nd.mask_logits(logits, allowed))
+    np.testing.assert_allclose(nd.categorical_log_prob_grad(probs, choice, grad_lp) * allowed,
+                               logits_t.grad.numpy(), rtol=1e-5, atol=1e-6)
+
+    logits_t = t(logits).requires_grad_()
+    td.categorical_entropy(torch.softmax(td.mask_logits(logits_t, t(allowed)), dim=1)).sum().backward()
+    np.testing.assert_allclose(nd.categorical_entropy_grad(probs) * allowed, logits_t.grad.numpy(),
+                               rtol=1e-4, atol=1e-6)
