@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # Creates or updates .venv (and .venv-interop, the real ML-Agents 1.1.0 used as interop peer),
 # then runs the whole test suite. Extra arguments go to pytest, e.g. ./test.sh -k codec
+#   PYTHON=python3.13 VENV=.venv-3.13 INTEROP_VENV=.venv-interop-3.13 ./test.sh   another Python
+#   (the venvs' folders: scripts/ensure_venv.sh, scripts/ensure_interop_venv.sh; the tests find
+#   the interop venv through INTEROP_VENV too)
 set -euo pipefail
 cd "$(dirname "$0")"
 ./scripts/ensure_venv.sh
 ./scripts/ensure_interop_venv.sh
-exec .venv/bin/python -m pytest -q -p no:cacheprovider "$@"
+exec "${VENV:-.venv}/bin/python" -m pytest -q -p no:cacheprovider "$@"

@@ -1,6 +1,7 @@
 """Fixtures for proving interop against the REAL ML-Agents 1.1.0 (its own venv, own processes).
 
-* ``interop_python``  - /work/main/.venv-interop/bin/python, or the test is skipped with the reason
+* ``interop_python``  - the interop venv's python (tests/interop_venv.py: .venv-interop, or
+                        INTEROP_VENV), or the test is skipped with the reason
 * ``stub_executable`` - factory: task name -> ``<tmp>/Stub<Task>.x86_64``, a ``#!/bin/sh`` script
                         that execs this interpreter's ``-m unity_stub_env.cli --task <task> "$@"``,
                         laid out like a Linux Unity player build
@@ -20,11 +21,9 @@ from pathlib import Path
 
 import pytest
 
+from tests.interop_venv import INTEROP_PYTHON, INTEROP_VENV, REPO
 from unity_stub_env.launcher import write_player_launcher
 
-REPO = Path(__file__).resolve().parents[2]
-INTEROP_VENV = REPO / ".venv-interop"
-INTEROP_PYTHON = INTEROP_VENV / "bin" / "python"
 PEER_SCRIPTS = Path(__file__).resolve().parent / "peer_scripts"
 
 

@@ -24,9 +24,9 @@ from protos.communicator_objects import (
     unity_rl_output_pb2,
     unity_to_external_pb2,
 )
+from tests.interop_venv import INTEROP_PYTHON
 
 ROOT = Path(__file__).resolve().parents[2]
-INTEROP_PYTHON = ROOT / ".venv-interop" / "bin" / "python"
 
 # FieldDescriptorProto type / label numbers
 FLOAT, INT32, BOOL, STRING, MESSAGE, BYTES, ENUM = 2, 5, 8, 9, 11, 12, 14

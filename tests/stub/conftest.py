@@ -18,9 +18,10 @@ from protos.communicator_objects import (
     unity_message_pb2,
     unity_to_external_pb2_grpc,
 )
+from tests import interop_venv
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-INTEROP_PYTHON = os.path.join(REPO, ".venv-interop", "bin", "python")  # the real ML-Agents 1.1.0
+INTEROP_PYTHON = str(interop_venv.INTEROP_PYTHON)  # the real ML-Agents 1.1.0
 STEP, RESET, QUIT = 0, 1, 2
 Message = unity_message_pb2.UnityMessageProto
 

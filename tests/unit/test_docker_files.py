@@ -55,7 +55,7 @@ def test_hadolint_passes_the_dockerfile():
 
 
 def test_shellcheck_passes_the_shell_scripts():
-    scripts = [SBATCH, ROOT / "scripts" / "ensure_slurm.sh"]
+    scripts = [SBATCH, *sorted((ROOT / "scripts").glob("*.sh")), ROOT / "test.sh", ROOT / "run.sh", ROOT / ".ci" / "run"]
     r = subprocess.run([tool("shellcheck"), *map(str, scripts)], capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
 

@@ -7,6 +7,7 @@ import os
 
 import pytest
 
+import trainer
 from trainer.artifacts.timers import TimerTree
 from trainer.artifacts.training_status import CheckpointEntry, TrainingStatus
 from trainer.errors import UserError
@@ -86,8 +87,8 @@ def test_metadata_and_atomic_write(tmp_path):
     assert meta["end_time_seconds"] == "1700000123"
     assert meta["command_line_arguments"] == "mlagents-like-learn x.yaml --run-id=a"
     assert meta["communication_protocol_version"] == "1.5.0"
-    assert meta["mlagents_like_version"] == "0.1.0"
-    assert meta["mlagents_version"] == "0.1.0"
+    assert meta["mlagents_like_version"] == trainer.__version__
+    assert meta["mlagents_version"] == trainer.__version__
     for key in ("python_version", "mlagents_envs_version", "pytorch_version", "numpy_version"):
         assert meta[key]
     assert os.listdir(path.parent) == ["timers.json"]  # no temp file left behind

@@ -38,7 +38,11 @@ def package_version(dist_name: str = PACKAGE_NAME, module: str | None = None) ->
     try:
         return importlib_metadata.version(dist_name)
     except importlib_metadata.PackageNotFoundError:
-        return "0.1.0" if dist_name == PACKAGE_NAME else "unknown"
+        if dist_name == PACKAGE_NAME:  # run from a checkout that pip did not install
+            from trainer import __version__
+
+            return __version__
+        return "unknown"
 
 
 class TimerNode:

@@ -69,6 +69,30 @@ class _Removed(argparse.Action):
         logger.warning("The command line argument %s was removed.", option_string)
 
 
+class _ShippedFiles(argparse.Action):
+    """``--list-configs``, ``--copy-configs DIR``, ``--write-slurm-template DIR``: print or copy
+    files the package ships (trainer/shipped: what a pip user has instead of the checkout's
+    configs/ and docker/slurm/), then exit as ``--help`` does, without training."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        from pathlib import Path
+
+        from trainer import shipped
+
+        try:
+            if self.dest == "list_configs":
+                lines = [str(path) for path in shipped.config_paths()]
+            elif self.dest == "copy_configs":
+                lines = [f"wrote {path}" for path in shipped.copy_configs(values)]
+            else:
+                lines = [f"wrote {path}" for path in shipped.write_slurm_template(values)]
+                lines.append(shipped.slurm_usage(Path(values)))
+        except OSError as err:
+            parser.exit(2, f"{parser.prog}: error: {option_string}: {err}\n")
+        print("\n".join(lines))
+        parser.exit(0)
+
+
 def _value_type(section: type, name: str) -> type | None:
     """int or float for a numeric field (None allowed), else None: argparse keeps the string."""
     hint = typing.get_type_hints(section)[name]
@@ -124,6 +148,12 @@ def _add_general_flags(parser: argparse.ArgumentParser) -> None:
     _setting_flag(parser, env, "bind", "address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")
     _setting_flag(parser, RunOptions, "batch_per_rank", "data-parallel ranks: buffer_size and batch_size are each "
                   "rank's, not all ranks' together (the default; docs/cluster.md)")
+    shipped = parser.add_argument_group(title="Files the package ships (without a checkout of the repository)")
+    shipped.add_argument("--list-configs", nargs=0, default=False, action=_ShippedFiles, help="print the paths of the example configs, then exit")
+    shipped.add_argument("--copy-configs", metavar="DIR", action=_ShippedFiles,
+                         help="copy the example configs into DIR, then exit")
+    shipped.add_argument("--write-slurm-template", metavar="DIR", action=_ShippedFiles,
+                         help="write the Slurm job template (train.sbatch, sweep.sh, sweep.py) into DIR, then exit")
     mirror = parser.add_argument_group(title="Behavior specs (docs/mirror.md)")
     _setting_flag(mirror, RunOptions, "capture_spec", "connect to --env, record its behavior specs to FILE after "
                   "the first steps and exit without training", metavar="FILE")
