@@ -215,10 +215,16 @@ def test_a_sweep_runs_one_array_element_per_seed_and_summarises_them(cluster, tm
                         cwd=ROOT).stdout.splitlines()
     assert table[0].split() == ["element", "run_id", "seed", "behaviors.Basic.hyperparameters.lambd",
                                 "behavior", "step", "final", "reward"]
-    rows = [line.split() for line in table[1:]]
+    blank = table.index("")  # the per-element table, then the mean over seeds (mlagents-like-plot's aggregation)
+    rows = [line.split() for line in table[1:blank]]
     assert [r[:6] for r in rows] == [["0", "sw_0", "4", "0.9", "Basic", "1000"], ["1", "sw_1", "5", "0.9", "Basic", "1000"]]
     for r in rows:
         assert -1.0 <= float(r[6]) <= 1.0  # Basic's rewards: a mean return, not a placeholder
+    assert table[blank + 2].split()[:4] == ["setting/behavior", "seeds", "step", "mean"]
+    grouped = table[blank + 3].split()
+    assert grouped[-6:-4] == ["2", "1000"], table[blank:]  # seeds, the last step both reached
+    # the mean of the two finals, each printed to 4 decimals: equal within their rounding
+    assert abs(float(grouped[-4]) - (float(rows[0][6]) + float(rows[1][6])) / 2) <= 1e-4, table[blank:]
 
 
 def test_scancel_saves_and_ends_the_job_without_requeue(cluster, tmp_path):

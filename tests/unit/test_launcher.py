@@ -56,7 +56,9 @@ def test_checking_a_stub_task_name_does_not_import_mujoco():
              "resolve_env_path('stub:ball3d'); import unity_stub_env; "
              "print(sorted(m for m in sys.modules if m.split('.')[0] in ('mujoco', 'unity_stub_env')))")
     loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
-    assert loaded.strip() == "['unity_stub_env', 'unity_stub_env.launcher', 'unity_stub_env.task_names']"
+    # render.gl only sets MUJOCO_GL's headless default (it must run before MuJoCo is imported)
+    assert loaded.strip() == ("['unity_stub_env', 'unity_stub_env.launcher', 'unity_stub_env.render', "
+                              "'unity_stub_env.render.gl', 'unity_stub_env.task_names']")
 
 
 @pytest.mark.parametrize("given", ["Game", "Game.x86_64", "Game.exe", "Game.app", "Game.x86"])
