@@ -1,9 +1,10 @@
-"""``render_mode="rgb_array"`` frames of a MuJoCo stub task: MuJoCo's offscreen renderer with its
-default free camera (the whole scene in view). Tasks that are not MuJoCo scenes (``basic``,
-``runner``) have no frames.
+"""``render_mode="rgb_array"`` frames of a MuJoCo stub task: the stub's own view
+(``unity_stub_env.render.scene.MujocoView``: the camera on the first agent, the task's cues), so a
+Gymnasium frame shows what ``unity-stub-env --play`` films. Tasks without a MuJoCo scene
+(``basic``, ``runner``, ``mirror``) have no frames here.
 
-MuJoCo picks its OpenGL backend once, when it is first imported, from MUJOCO_GL: on a machine
-without a display that must be ``egl`` (or ``osmesa``) before anything imports mujoco."""
+MuJoCo picks its OpenGL backend once, when it is first imported, from MUJOCO_GL; importing
+``unity_stub_env`` sets the headless default (docs/video.md)."""
 from __future__ import annotations
 
 import numpy as np
@@ -12,30 +13,25 @@ DEFAULT_SIZE = (480, 640)  # height, width
 
 
 def can_render(task) -> bool:
-    return hasattr(task, "model") and hasattr(task, "data")
+    from unity_stub_env.render.scene import SHOTS
+
+    return task.name in SHOTS
 
 
 class FrameRenderer:
     def __init__(self, task, height: int = DEFAULT_SIZE[0], width: int = DEFAULT_SIZE[1]) -> None:
-        import mujoco
+        from unity_stub_env.render.scene import MujocoView
 
-        self._mujoco = mujoco
-        self.task = task
-        try:
-            self.renderer = mujoco.Renderer(task.model, height=height, width=width)
-        except Exception as error:  # the backend's own errors name neither the cause nor the fix
-            raise RuntimeError(f"MuJoCo's offscreen renderer could not start ({error}); without a display, "
-                               "set MUJOCO_GL=egl (or osmesa) in the environment before Python starts") from error
-        self.camera = mujoco.MjvCamera()
-        mujoco.mjv_defaultFreeCamera(task.model, self.camera)
+        self.view = MujocoView(task, agent=0, width=width, height=height)
 
     def frame(self) -> np.ndarray:
         """uint8 [height, width, 3] of the scene as it is now."""
+        import mujoco
+
         # positions of the bodies from qpos: a reset writes qpos only, and mj_step recomputes
         # these anyway, so the simulation does not depend on whether anyone renders
-        self._mujoco.mj_kinematics(self.task.model, self.task.data)
-        self.renderer.update_scene(self.task.data, camera=self.camera)
-        return self.renderer.render()
+        mujoco.mj_kinematics(self.view.task.model, self.view.task.data)
+        return self.view.frame()
 
     def close(self) -> None:
-        self.renderer.close()
+        self.view.close()
