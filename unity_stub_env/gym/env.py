@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 
 from unity_stub_env.gym import spaces
-from unity_stub_env.gym.render import FrameRenderer, can_render
+from unity_stub_env.gym.render import SceneFrames, can_render
 from unity_stub_env.gym.scene import Scene
 
 
@@ -38,13 +38,12 @@ class StubEnv(gym.Env):
         if render_mode is not None and not can_render(self.scene.task):
             raise ValueError(f"Task {task!r} is not a MuJoCo scene and has no frames; leave render_mode unset")
         self.render_mode = render_mode
-        self._renderer: FrameRenderer | None = None
+        self._frames = SceneFrames(self.scene, render_mode)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        if seed is not None and self._renderer is not None:  # the rebuilt task has a new MjModel
-            self._renderer.close()
-            self._renderer = None
+        if seed is not None:  # the rebuilt task has a new MjModel
+            self._frames.drop()
         observations = self.scene.reset(seed)
         return spaces.observations(self.scene.observation_specs, observations, 0), {}
 
@@ -56,13 +55,7 @@ class StubEnv(gym.Env):
         return obs, float(result.rewards[0]), bool(result.terminated[0]), bool(result.truncated[0]), {}
 
     def render(self):
-        if self.render_mode != "rgb_array":
-            return None
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.scene.task)
-        return self._renderer.frame()
+        return self._frames.frame()
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._frames.drop()

@@ -18,7 +18,7 @@ import numpy as np
 from pettingzoo import ParallelEnv
 
 from unity_stub_env.gym import spaces
-from unity_stub_env.gym.render import FrameRenderer, can_render
+from unity_stub_env.gym.render import SceneFrames, can_render
 from unity_stub_env.gym.scene import Scene
 
 
@@ -46,7 +46,7 @@ class StubParallelEnv(ParallelEnv):
                                         or not can_render(self.scene.task)):
             raise ValueError(f"render_mode {render_mode!r} is not available for task {task!r}")
         self.render_mode = render_mode
-        self._renderer: FrameRenderer | None = None
+        self._frames = SceneFrames(self.scene, render_mode)
         self.agents: list[str] = []
         self._live = np.zeros(self.scene.num_agents, dtype=bool)
 
@@ -57,9 +57,8 @@ class StubParallelEnv(ParallelEnv):
         return self.action_spaces[agent]
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
-        if seed is not None and self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        if seed is not None:  # the rebuilt task has a new MjModel
+            self._frames.drop()
         observations = self.scene.reset(seed)
         for name in self.possible_agents:  # agents' spaces sample reproducibly after a seeded reset
             if seed is not None:
@@ -107,13 +106,7 @@ class StubParallelEnv(ParallelEnv):
         return {name: spaces.observations(specs, observations, self._row[name]) for name in names}
 
     def render(self):
-        if self.render_mode != "rgb_array":
-            return None
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.scene.task)
-        return self._renderer.frame()
+        return self._frames.frame()
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._frames.drop()

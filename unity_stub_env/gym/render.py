@@ -35,3 +35,25 @@ class FrameRenderer:
 
     def close(self) -> None:
         self.view.close()
+
+
+class SceneFrames:
+    """The frames of one in-process env (single-agent, vector or PettingZoo): the renderer opens at
+    the first ``render()`` and is dropped when the scene rebuilds its task (a seeded reset makes a
+    new MjModel) or the env closes."""
+
+    def __init__(self, scene, render_mode: str | None) -> None:
+        self.scene, self.render_mode = scene, render_mode
+        self._renderer: FrameRenderer | None = None
+
+    def frame(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            self._renderer = FrameRenderer(self.scene.task)
+        return self._renderer.frame()
+
+    def drop(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

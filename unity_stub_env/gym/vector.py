@@ -19,7 +19,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from unity_stub_env.gym import spaces
-from unity_stub_env.gym.render import FrameRenderer, can_render
+from unity_stub_env.gym.render import SceneFrames, can_render
 from unity_stub_env.gym.scene import Scene
 
 
@@ -56,13 +56,12 @@ class StubVectorEnv(VectorEnv):
                                         or not can_render(self.scene.task)):
             raise ValueError(f"render_mode {render_mode!r} is not available for task {task!r}")
         self.render_mode = render_mode
-        self._renderer: FrameRenderer | None = None
+        self._frames = SceneFrames(self.scene, render_mode)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        if seed is not None and self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        if seed is not None:  # the rebuilt task has a new MjModel
+            self._frames.drop()
         observations = self.scene.reset(seed)
         return spaces.observations(self.scene.observation_specs, observations), {}
 
@@ -82,13 +81,7 @@ class StubVectorEnv(VectorEnv):
         return obs, result.rewards, result.terminated, result.truncated, infos
 
     def render(self):
-        if self.render_mode != "rgb_array":
-            return None
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.scene.task)
-        return self._renderer.frame()
+        return self._frames.frame()
 
     def close_extras(self, **kwargs) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._frames.drop()
