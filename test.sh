@@ -8,4 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")"
 ./scripts/ensure_venv.sh
 ./scripts/ensure_interop_venv.sh
-exec "${VENV:-.venv}/bin/python" -m pytest -q -p no:cacheprovider "$@"
+# One pytest-xdist worker per CPU; tests that share something (the private Slurm cluster, a fixed
+# port, an expensive module fixture) carry one xdist_group mark and run in one worker
+# (docs/testing.md). ./test.sh -n 0 runs everything in this process, one test at a time.
+exec "${VENV:-.venv}/bin/python" -m pytest -q -p no:cacheprovider -n auto --dist loadgroup "$@"
