@@ -6,8 +6,15 @@
 #   the interop venv through INTEROP_VENV too)
 set -euo pipefail
 cd "$(dirname "$0")"
-./scripts/ensure_venv.sh
-./scripts/ensure_interop_venv.sh
+# The two venvs are independent and pip uses one CPU: they are made side by side.
+./scripts/ensure_interop_venv.sh &
+interop=$!
+venv_status=0
+./scripts/ensure_venv.sh || venv_status=$?
+interop_status=0
+wait "$interop" || interop_status=$?
+[ "$venv_status" -eq 0 ] || exit "$venv_status"
+[ "$interop_status" -eq 0 ] || exit "$interop_status"
 # One pytest-xdist worker per CPU; tests that share something (the private Slurm cluster, a fixed
 # port, an expensive module fixture) carry one xdist_group mark and run in one worker
 # (docs/testing.md). ./test.sh -n 0 runs everything in this process, one test at a time.
