@@ -16,6 +16,6 @@ wait "$interop" || interop_status=$?
 [ "$venv_status" -eq 0 ] || exit "$venv_status"
 [ "$interop_status" -eq 0 ] || exit "$interop_status"
 # One pytest-xdist worker per CPU; tests that share something (the private Slurm cluster, a fixed
-# port, an expensive module fixture) carry one xdist_group mark and run in one worker
-# (docs/testing.md). ./test.sh -n 0 runs everything in this process, one test at a time.
+# port, an expensive module fixture) are a group run by one worker: XDIST_GROUPS in
+# tests/conftest.py (docs/testing.md). ./test.sh -n 0 runs everything in one process.
 exec "${VENV:-.venv}/bin/python" -m pytest -q -p no:cacheprovider -n auto --dist loadgroup "$@"

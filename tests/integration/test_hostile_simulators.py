@@ -146,7 +146,6 @@ def test_a_second_m1_in_the_handshake_still_trains(tmp_path, env_no_proxy):
     assert (tmp_path / "results" / "r" / "H.onnx").is_file()
 
 
-@pytest.mark.xdist_group("port_5004")  # the Editor's fixed port: one xdist worker binds it at a time
 def test_editor_mode_port_in_use_gives_advice_that_works(tmp_path, env_no_proxy):
     """Without --env the Editor connects to 5004 whatever --base-port says: the message must
     not send the user to --base-port."""

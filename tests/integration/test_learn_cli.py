@@ -387,7 +387,6 @@ def test_extrinsic_reward_and_timers_gauges_as_mlagents(tmp_path, basic_config, 
 
 
 @pytest.mark.may_skip_in_ci  # another program may hold port 5004 on any machine, CI's included
-@pytest.mark.xdist_group("port_5004")  # the Editor's fixed port: one xdist worker binds it at a time
 def test_editor_mode_listens_on_5004_and_trains_the_player_that_connects(tmp_path, basic_config, env_no_proxy):
     """No --env: the trainer says it waits on 5004 (--base-port is for built players only); a
     'Play' (here the stub, started by hand on 5004, as the Editor would connect) is trained."""

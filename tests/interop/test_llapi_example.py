@@ -50,7 +50,6 @@ def run_example(prefix: list[str], python: str, script, folder) -> dict:
 
 
 @pytest.mark.may_skip_in_ci  # without network namespaces, another program may hold port 5004 or 5005
-@pytest.mark.xdist_group("port_5004")  # without a namespace it binds the Editor's fixed port
 def test_the_python_llapi_page_ported_by_its_imports(tmp_path, interop_python):
     prefix = own_network()
     if prefix is None:

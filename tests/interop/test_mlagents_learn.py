@@ -62,10 +62,6 @@ def _state(proc_dir: Path) -> str:
     return ""
 
 
-# one xdist worker runs every test of this module, so mlagents-learn trains once (trained_run)
-pytestmark = pytest.mark.xdist_group("mlagents_learn_run")
-
-
 @pytest.fixture(scope="module")
 def trained_run(interop_python, tmp_path_factory, stub_launcher, free_port):
     """Runs mlagents-learn once for all checks of this module."""

@@ -13,8 +13,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from tests.slurm.cluster import ROOT
 
-# one xdist worker starts the private clusters (session fixtures) and runs every job on them
-pytestmark = [pytest.mark.slurm, pytest.mark.xdist_group("slurm")]
+pytestmark = pytest.mark.slurm
 
 TEMPLATE = "docker/slurm/train.sbatch"
 MAX_STEPS, BUFFER = 2000, 128

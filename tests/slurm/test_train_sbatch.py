@@ -18,8 +18,7 @@ from tensorboard.backend.event_processing.event_file_loader import LegacyEventFi
 
 from tests.slurm.cluster import ROOT
 
-# one xdist worker starts the private clusters (session fixtures) and runs every job on them
-pytestmark = [pytest.mark.slurm, pytest.mark.xdist_group("slurm")]
+pytestmark = pytest.mark.slurm
 
 TEMPLATE = "docker/slurm/train.sbatch"
 MAX_STEPS, SUMMARY, INTERVAL = 6000, 500, 1000

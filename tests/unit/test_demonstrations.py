@@ -227,7 +227,6 @@ def test_gail_reward_is_minus_log_one_minus_d():
 UPDATES, MARGIN = 200, 0.1
 
 
-@pytest.mark.xdist_group("ball3d_demos")  # one worker records ball3d_demos once for the three
 @pytest.mark.parametrize("network", [{}, {"use_actions": True}, {"use_vail": True}])
 def test_gail_rewards_expert_steps_above_random_ones_after_training(ball3d_demos, network):
     """Trained on 800 expert and 800 random-action steps of ball3d, the discriminator's reward
