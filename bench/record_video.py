@@ -2,9 +2,12 @@
 a frequent and at a realistic checkpoint interval.
 
     nice -n 10 .venv/bin/python bench/record_video.py [--task ball3d] [--config configs/ball3d.yaml]
-        [--settings 180000:6000 180000:60000] [--pairs 3]
+        [--settings 240000:6000 60000:30000] [--pairs 3]
 
-Each setting STEPS:INTERVAL trains --config on stub:TASK for STEPS steps with checkpoint_interval
+The frequent setting runs long enough (about 75 s on the quiet machine) for the CPU budget to
+allow clips while training (docs/video.md, "Clips while training": about a minute of training on
+2 cores pays for the first); the realistic one has a few checkpoints per run, as a long run with
+ML-Agents' intervals has. Each setting STEPS:INTERVAL trains --config on stub:TASK for STEPS steps with checkpoint_interval
 INTERVAL, once plain and once with --record-video, in alternating order; --pairs pairs per
 setting. Throughput = steps / the trainer's wall time (process start to the "Copied <final>.onnx"
 log line: the wait for the final clip at the end excluded). Prints each pair (the slowdown, the
@@ -100,12 +103,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--task", default="ball3d")
     parser.add_argument("--config", default=str(ROOT / "configs" / "ball3d.yaml"))
-    parser.add_argument("--settings", nargs="+", type=setting, default=[(180000, 6000), (180000, 60000)],
+    parser.add_argument("--settings", nargs="+", type=setting, default=[(240000, 6000), (60000, 30000)],
                         metavar="STEPS:INTERVAL", help="max_steps and checkpoint_interval of each setting")
     parser.add_argument("--pairs", type=int, default=3)
     args = parser.parse_args()
     config = yaml.safe_load(Path(args.config).read_text())
     results = []
+    began = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for steps, interval in args.settings:
             rows = pairs_of(config, args.task, steps, interval, args.pairs, Path(tmp))
@@ -114,6 +118,7 @@ def main() -> None:
     for result in results:
         print(f"median slowdown {100 * result['median']:+.1f} % over {len(result['rows'])} pairs ({args.task}, "
               f"{result['steps']} steps, a checkpoint every {result['checkpoint_interval']})")
+    print(f"{(time.perf_counter() - began) / 60:.1f} minutes in all")
     out = ROOT / "bench" / "out"
     out.mkdir(exist_ok=True)
     (out / "record_video.json").write_text(json.dumps({"args": {**vars(args), "settings": args.settings},
