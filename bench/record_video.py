@@ -4,12 +4,12 @@ a frequent and at a realistic checkpoint interval.
     nice -n 10 .venv/bin/python bench/record_video.py [--task ball3d] [--config configs/ball3d.yaml]
         [--settings 240000:6000 60000:30000] [--pairs 3]
 
-The frequent setting runs long enough (about 75 s on the quiet machine) for the CPU budget to
-allow clips while training (docs/video.md, "Clips while training": about a minute of training on
-2 cores pays for the first); the realistic one has a few checkpoints per run, as a long run with
-ML-Agents' intervals has. Each setting STEPS:INTERVAL trains --config on stub:TASK for STEPS steps with checkpoint_interval
+Each setting STEPS:INTERVAL trains --config on stub:TASK for STEPS steps with checkpoint_interval
 INTERVAL, once plain and once with --record-video, in alternating order; --pairs pairs per
-setting. Throughput = steps / the trainer's wall time (process start to the "Copied <final>.onnx"
+setting. The frequent setting runs long enough (about 75 s on the quiet machine) for the CPU
+budget to allow clips while training (docs/video.md, "Clips while training": about a minute of
+training on 2 cores pays for the first); the realistic one has a few checkpoints per run, as a
+long run with ML-Agents' intervals has. Throughput = steps / the trainer's wall time (process start to the "Copied <final>.onnx"
 log line: the wait for the final clip at the end excluded). Prints each pair (the slowdown, the
 clips written, the checkpoints, and the renderer's CPU share while training as the trainer logs
 it), the median slowdown per setting; writes bench/out/record_video.json. Target: each median

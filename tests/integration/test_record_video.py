@@ -48,7 +48,7 @@ def test_record_video_films_checkpoints_into_tensorboard(tmp_path):
     assert set(steps) <= onnx_steps and steps[-1] == max(onnx_steps)  # the final model's clip: always made
     # the clips play the run's environment parameters, as its simulators got them
     assert log.count("environment parameters: clip_check~uniform(1.0, 2.0)") == len(clips), log[-2000:]
-    assert not list((brain / "clips").glob(".*.onnx"))  # the models' copies are gone
+    assert not list((brain / "clips").glob("*.onnx"))  # the models' copies are gone
     with av.open(str(clips[-1])) as container:
         frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
     assert len(frames) == 200 and frames[0].shape == (240, 320, 3)  # 10 s at 20 fps

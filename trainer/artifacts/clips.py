@@ -141,7 +141,7 @@ class ClipRecorder:
         folder = Path(onnx_path).parent
         (folder / "clips").mkdir(exist_ok=True)
         # a copy: keep_checkpoints may delete the model before the nice-19 renderer reads it
-        model = folder / "clips" / f".{brain}-{step}.onnx"
+        model = folder / "clips" / f"{brain}-{step}.onnx"  # (its name is the clip's caption)
         shutil.copyfile(onnx_path, model)
         return {"task": self.task, "policy": str(model), "video": str(folder / f"{brain}-{step}.mp4"),
                 "seconds": SECONDS, "fps": FPS, "width": SIZE[0], "height": SIZE[1], "samples": 0,
@@ -214,7 +214,7 @@ class ClipRecorder:
         spent, elapsed = self.training or (self.spent, self.clock() - self.started)
         done = self.wait_idle(timeout)
         # the share of the clips finished while training (the final clip comes after it)
-        logger.info("--record-video: %d of %d checkpoints filmed; while training the renderer used %.1f CPU-s, "
+        logger.info("--record-video: %d of %d checkpoints filmed; the clips finished while training used %.1f CPU-s, "
                     "%.1f %% of %d CPUs over %.0f s (%.1f CPU-s in all).", self.asked - self.skipped, self.asked,
                     spent, 100 * spent / max(elapsed * self.cpus, 1e-9), self.cpus, elapsed, self.spent)
         try:
