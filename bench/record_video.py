@@ -2,7 +2,7 @@
 a frequent and at a realistic checkpoint interval.
 
     nice -n 10 .venv/bin/python bench/record_video.py [--task ball3d] [--config configs/ball3d.yaml]
-        [--settings 240000:6000 60000:30000] [--pairs 3]
+        [--settings 300000:6000 40000:20000] [--pairs 3]
 
 Each setting STEPS:INTERVAL trains --config on stub:TASK for STEPS steps with checkpoint_interval
 INTERVAL, once plain and once with --record-video, in alternating order; --pairs pairs per
@@ -103,7 +103,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--task", default="ball3d")
     parser.add_argument("--config", default=str(ROOT / "configs" / "ball3d.yaml"))
-    parser.add_argument("--settings", nargs="+", type=setting, default=[(240000, 6000), (60000, 30000)],
+    parser.add_argument("--settings", nargs="+", type=setting, default=[(300000, 6000), (40000, 20000)],
                         metavar="STEPS:INTERVAL", help="max_steps and checkpoint_interval of each setting")
     parser.add_argument("--pairs", type=int, default=3)
     args = parser.parse_args()
