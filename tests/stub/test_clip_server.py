@@ -8,9 +8,11 @@ import io
 import json
 
 import numpy as np
+import pytest
 from PIL import Image
 
 from protos import side_channels as sc
+from unity_stub_env.render import RenderError
 from unity_stub_env.render.clip_server import describe_parameters, serve, stub_options
 from unity_stub_env.render.play import play
 
@@ -30,6 +32,8 @@ def test_stub_options_of_a_clip():
     assert stub_options("dodge", []) == (1, None)  # independent figures: the followed one alone
     assert stub_options("ball3d", ["--agents-per-area", "3", "--decision-period", "2", "--spin-wait-ms", "1"]) == (3, 2)
     assert stub_options("soccer", []) == (None, None)  # players that play together stay
+    with pytest.raises(RenderError, match="do not parse"):
+        stub_options("ball3d", ["--decision-period", "often"])
 
 
 def test_requests_are_filmed_in_turn_with_the_runs_environment_parameters(tmp_path):

@@ -42,7 +42,12 @@ def stub_options(task: str, stub_args: list[str]) -> tuple[int | None, int | Non
     from unity_stub_env.cli import build_parser
     from unity_stub_env.tasks import TASKS
 
-    known, _ = build_parser().parse_known_args(stub_args)
+    from unity_stub_env.render import RenderError
+
+    try:
+        known, _ = build_parser().parse_known_args(stub_args)
+    except SystemExit:  # argparse's message is in the log already
+        raise RenderError(f"the run's stub arguments {' '.join(stub_args)!r} do not parse") from None
     agents = known.agents_per_area
     if agents is None and task in TASKS and not TASKS[task].agents_interact:
         agents = 1
