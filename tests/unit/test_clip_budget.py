@@ -105,3 +105,18 @@ def test_a_busy_renderer_skips_checkpoints_but_the_final_one_waits_its_turn(setu
     assert recorder.wait_idle(60)
     assert sorted(p.name for p in model.parent.glob("*.mp4")) == ["B-1.mp4", "B-3.mp4"]
     assert recorder.spent == 8.0  # 2 + 3 + 3
+
+
+def test_a_renderer_that_dies_ends_the_clips_not_the_run(tmp_path, caplog):
+    model = tmp_path / "B" / "B-1.onnx"
+    model.parent.mkdir()
+    model.write_bytes(b"onnx")
+    clock = Clock()
+    recorder = ClipRecorder("ball3d", 1, str(tmp_path / "clips.log"), clock=clock, cpus=2,
+                            renderer=[sys.executable, "-c", "import sys; sys.exit(3)"], first_estimate=0.0)
+    assert recorder.after_checkpoint("B", str(model), 1)
+    assert recorder.wait_idle(60)  # the end of its answers counts as done
+    assert recorder.broken and "the clip renderer stopped" in caplog.text
+    assert not recorder.after_checkpoint("B", str(model), 2, final=True)
+    recorder.finish(timeout=60)
+    assert list((model.parent / "clips").iterdir()) == []
