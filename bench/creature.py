@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/creature.py steps [--areas 1 8] [--steps 200] [--repeats 5] [--kind quadruped]
     .venv/bin/python bench/creature.py evaluate POLICY [POLICY ...] [--kind quadruped --creature-seed 7]
-                     [--roughness 0] [--areas 8] [--minutes 2] [--seed 0]
+                     [--roughness 0] [--target-speed 1] [--areas 8] [--minutes 2] [--seed 0]
 
 ``steps``: per area count, three rows on the same MjModel (one creature per arena):
   * ``stub creature`` ``CreatureTask.step`` + ``reset`` of the finished agents, random actions in [-1, 1]
@@ -42,11 +42,13 @@ from dodge_steps import best_of  # noqa: E402  (bench/ is the script's folder on
 OUT = Path(__file__).resolve().parent / "out"
 
 
-def _params(kind: str, creature_seed: int, roughness: float = 0.0) -> EnvironmentParameters:
+def _params(kind: str, creature_seed: int, roughness: float = 0.0, target_speed: float = 1.0
+            ) -> EnvironmentParameters:
     params = EnvironmentParameters()
     params.set("creature_kind", lambda: float(KINDS.index(kind)))
     params.set("creature_seed", lambda: float(creature_seed))
     params.set("terrain_roughness", lambda: roughness)
+    params.set("target_speed", lambda: target_speed)
     return params
 
 
@@ -115,19 +117,19 @@ def _sampling(path: str):
 
 
 def evaluate_command(args) -> dict:
-    task = make_task("creature", num_areas=args.areas, seed=args.seed,
-                     env_params=_params(args.kind, args.creature_seed, args.roughness))
+    params = lambda: _params(args.kind, args.creature_seed, args.roughness, args.target_speed)  # noqa: E731
+    task = make_task("creature", num_areas=args.areas, seed=args.seed, env_params=params())
     size, actions = task.observation_specs[0].shape[0], task.action_spec.continuous_size
     control_steps = int(round(args.minutes * 60.0 / task.control_dt))
     results = {}
     for policy in dict.fromkeys([*args.policies, "zero", "random"]):
-        task = make_task("creature", num_areas=args.areas, seed=args.seed,
-                         env_params=_params(args.kind, args.creature_seed, args.roughness))
+        task = make_task("creature", num_areas=args.areas, seed=args.seed, env_params=params())
         act = load_policy(policy, size, actions, args.seed)
         if args.sample and policy.endswith(".onnx"):
             act = _sampling(policy)
         results[policy] = run_policy(task, act, control_steps)
-    print(f"{args.kind} seed {args.creature_seed}, roughness {args.roughness}, {args.areas} arenas x "
+    print(f"{args.kind} seed {args.creature_seed}, roughness {args.roughness}, target speed {args.target_speed} m/s, "
+          f"{args.areas} arenas x "
           f"{args.minutes} simulated min, {'sampled' if args.sample else 'mean'} actions")
     print("| policy | targets / min | distance m / min | towards target m / min | falls / min | mean reward / step |")
     print("|---|---|---|---|---|---|")
@@ -150,6 +152,9 @@ def main() -> None:
     evaluate.add_argument("--areas", type=int, default=8)
     evaluate.add_argument("--minutes", type=float, default=2.0)
     evaluate.add_argument("--seed", type=int, default=0)
+    evaluate.add_argument("--target-speed", type=float, default=1.0,
+                          help="the environment parameter target_speed (m/s) the policies were trained with: "
+                               "it is in their observation and sets the reward")
     evaluate.add_argument("--sample", action="store_true",
                           help="act with the .onnx policies' sampled actions (as in training) instead of their mean")
     for p in (steps, evaluate):
