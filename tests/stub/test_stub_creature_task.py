@@ -198,9 +198,10 @@ def test_shipped_config_names_only_parameters_the_task_reads():
     from trainer.config.cli_args import parse_run_options
     from unity_stub_env.tasks.creature import DEFAULTS
 
-    options = parse_run_options([os.path.join(REPO, "configs", "creature.yaml"), "--env", "stub:creature"])
-    assert list(options.behaviors) == ["Creature"]
-    assert set(options.environment_parameters) <= set(DEFAULTS)
+    for name in ("creature.yaml", "creature_walk.yaml"):
+        options = parse_run_options([os.path.join(REPO, "configs", name), "--env", "stub:creature"])
+        assert list(options.behaviors) == ["Creature"]
+        assert set(options.environment_parameters) <= set(DEFAULTS)
 
 
 def test_run_policy_counts_per_simulated_minute():
