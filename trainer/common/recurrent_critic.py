@@ -1,4 +1,5 @@
-"""A recurrent critic's value estimates over one trajectory: the one implementation PPO and SAC share.
+"""A recurrent critic's value estimates over one trajectory, and a trajectory's columns in whole
+sequences: the one implementation PPO and SAC share.
 
 The critic runs over the trajectory sequence by sequence (whole sequences of ``sequence_length``
 from the start, then the rest), its memory carried on from the agent's previous trajectory of the
@@ -48,6 +49,20 @@ class RecurrentCriticValues:
         if not traj.done:
             self._critic_memory[traj.episode] = memory[0]
         return {name: np.concatenate(v) for name, v in parts.items()}, next_values, starts
+
+    def _in_whole_sequences(self, traj: Trajectory, fields: dict[str, np.ndarray], critic_memories: np.ndarray
+                            ) -> dict[str, np.ndarray]:
+        """A trajectory's buffer columns ``fields`` [T, ...] with each step's actor memory, the critic
+        memory its sequence starts from (``critic_memories``) and masks 1, then padded with zeros
+        (masks 0) to whole sequences of ``sequence_length``: a recurrent update reads sequences."""
+        length = len(traj)
+        fields["memory"] = np.asarray(traj.memories, np.float32)
+        fields["critic_memory"] = critic_memories
+        fields["masks"] = np.ones(length, dtype=np.float32)
+        pad = -length % self.sequence_length
+        if pad:
+            fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
+        return fields
 
     def _critic_with_memory(self, obs: list[np.ndarray], memory: np.ndarray
                             ) -> tuple[dict[str, np.ndarray], np.ndarray]:

@@ -156,12 +156,7 @@ class PPOTrainer(RecurrentCriticValues, Trainer):
                                 else np.mean(np.stack(advantages), axis=0)).astype(np.float32)
         self._add_action_fields(traj, fields)
         if self.hyperparams.memory_size:
-            fields["memory"] = np.asarray(traj.memories, np.float32)
-            fields["critic_memory"] = critic_memories
-            fields["masks"] = np.ones(length, dtype=np.float32)
-            pad = -length % self.sequence_length  # whole sequences: zeros after the last step, masks 0
-            if pad:
-                fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
+            fields = self._in_whole_sequences(traj, fields, critic_memories)
         self.buffer.append(fields)
         self.step += length
         return stats

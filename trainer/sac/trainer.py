@@ -159,12 +159,7 @@ class SACTrainer(RecurrentCriticValues, Trainer):
         copy_normalization(self.policy.actor.network_body, self.critic.network_body)
         if self.hyperparams.memory_size:
             values, _, critic_memories = self._value_estimates_by_sequence(traj)
-            fields["memory"] = np.asarray(traj.memories, np.float32)
-            fields["critic_memory"] = critic_memories
-            fields["masks"] = np.ones(length, dtype=np.float32)
-            pad = -length % self.sequence_length  # whole sequences: zeros after the last step, masks 0
-            if pad:
-                fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
+            fields = self._in_whole_sequences(traj, fields, critic_memories)
         elif self._numpy_critic is not None:
             values = self._numpy_critic(obs)
         else:
