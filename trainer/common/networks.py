@@ -20,7 +20,7 @@ from torch import nn
 from trainer.errors import ConfigError
 from trainer.common.distributions import mask_logits
 from trainer.common.encoders import VectorInput, make_visual_encoder
-from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.common.hyperparams import NetworkHyperparams
 from trainer.common.layers import KAIMING_NORMAL, XAVIER_UNIFORM, hidden_layers, linear_layer
 from protos.types import ActionSpec, ObservationSpec
 
@@ -28,7 +28,7 @@ MODEL_EXPORT_VERSION = 3
 LOG_SIGMA_MIN, LOG_SIGMA_MAX = -20.0, 2.0  # the clamp of a squashed (SAC) actor's log sigma
 
 
-def check_network_settings(hyperparams: PPOHyperparams) -> None:
+def check_network_settings(hyperparams: NetworkHyperparams) -> None:
     if hyperparams.memory_size % 2 or hyperparams.memory_size < 0:
         raise ConfigError(f"network_settings.memory.memory_size must be even, got {hyperparams.memory_size}")
 
@@ -98,7 +98,7 @@ class ObservationEncoder(nn.Module):
 class NetworkBody(nn.Module):
     """Observation encoders -> hidden layers. [n, *shape_i] ... -> [n, hidden_units]."""
 
-    def __init__(self, observation_specs: Sequence[ObservationSpec], hyperparams: PPOHyperparams,
+    def __init__(self, observation_specs: Sequence[ObservationSpec], hyperparams: NetworkHyperparams,
                  action_size: int = 0):
         super().__init__()
         check_network_settings(hyperparams)
@@ -150,7 +150,7 @@ class Actor(nn.Module):
     """
 
     def __init__(self, observation_specs: Sequence[ObservationSpec], action_spec: ActionSpec,
-                 hyperparams: PPOHyperparams, squashed: bool = False):
+                 hyperparams: NetworkHyperparams, squashed: bool = False):
         super().__init__()
         self.action_spec = action_spec
         self.squashed = squashed  # SAC: state-dependent sigma, tanh-squashed samples
@@ -226,7 +226,7 @@ class Critic(nn.Module):
     """
 
     def __init__(self, observation_specs: Sequence[ObservationSpec], reward_signal_names: Sequence[str],
-                 hyperparams: PPOHyperparams, shared_body: NetworkBody | None = None,
+                 hyperparams: NetworkHyperparams, shared_body: NetworkBody | None = None,
                  action_size: int = 0, outputs_per_signal: int = 1):
         super().__init__()
         self.shared = shared_body is not None

@@ -22,22 +22,11 @@ from trainer.common.distributions import (
     gaussian_log_prob,
 )
 from trainer.common.networks import Actor
-from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.common.hyperparams import NetworkHyperparams
 from protos.types import ActionTuple, BehaviorSpec
 
 CONTINUOUS_CLIP = 3.0
 _MAX, _SUM = np.maximum.reduce, np.add.reduce  # ndarray.max/sum without their Python wrappers
-
-
-def _numpy_entropy(n: int, gaussian_mean: float | None, branch_probs: list[np.ndarray]) -> np.ndarray:
-    """float32 [n]: the Gaussian's mean entropy over its dimensions (None without continuous
-    actions) plus each discrete branch's entropy, from ``_act_numpy``'s probabilities [n, k]."""
-    entropy = np.zeros(n, dtype=np.float32)
-    if gaussian_mean is not None:
-        entropy = entropy + gaussian_mean
-    for probs in branch_probs:
-        entropy = entropy + nd.categorical_entropy(probs)
-    return entropy.astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -72,7 +61,7 @@ class Policy:
 
     SQUASHED = False
 
-    def __init__(self, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int,
+    def __init__(self, behavior_spec: BehaviorSpec, hyperparams: NetworkHyperparams, seed: int,
                  device: str = "cpu"):
         self.behavior_spec = behavior_spec
         self.action_spec = behavior_spec.action_spec
@@ -167,16 +156,15 @@ class Policy:
         mu, logits, memories_out = self._numpy_actor.heads(list(obs), action_mask, memories)
         n = len(obs[0])
         log_parts: list[np.ndarray] = []
-        gaussian_entropy, branch_probs = None, []
+        continuous_entropy = None
         if mu is not None:
-            sigma, gaussian_entropy_mean = self._numpy_actor.gaussian()
+            sigma, continuous_entropy = self._numpy_actor.gaussian()
             if deterministic:
                 raw = mu
             else:
                 noise = torch.randn(mu.shape, generator=self.generator).numpy()
                 raw = mu + noise * sigma
             log_parts.append(nd.gaussian_log_prob(raw, mu, self._numpy_actor.log_sigma, float64_constant=True))
-            gaussian_entropy = gaussian_entropy_mean
             raw = raw.astype(np.float32, copy=False)
             env_continuous = np.minimum(np.maximum(raw, -CONTINUOUS_CLIP), CONTINUOUS_CLIP) / CONTINUOUS_CLIP
         else:
@@ -188,7 +176,8 @@ class Policy:
             continuous_raw=raw,
             discrete=discrete,
             log_probs=log_probs.astype(np.float32, copy=False),
-            entropy_of=functools.partial(_numpy_entropy, n, gaussian_entropy, branch_probs),
+            entropy_of=lambda: nd.combined_entropy(
+                continuous_entropy, [nd.categorical_entropy(probs) for probs in branch_probs], n),
             memories=memories_out,
         )
 

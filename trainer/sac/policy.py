@@ -18,29 +18,15 @@ import torch
 
 from protos.types import ActionTuple
 from trainer.common import numpy_distributions as nd
-from trainer.common.distributions import EPSILON
+from trainer.common.distributions import categorical_option_log_probs, squashed_log_prob, squashed_sample
 from trainer.common.policy import Policy, PolicyOutput, allowed_from_mask
-from trainer.sac.losses import squashed_log_prob
 
-_LOG_2 = np.log(2.0)
-
-
-def _numpy_squashed_log_prob(raw: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
-    """losses.squashed_log_prob in numpy: the Gaussian's log-density less the tanh's log |Jacobian|
-    (float64, as SAC's numpy paths have always computed it). [n, c] -> [n, c]."""
-    gaussian = nd.gaussian_log_prob(raw, mu, log_sigma, float64_constant=True)
-    return gaussian - 2.0 * (_LOG_2 - raw - np.logaddexp(0.0, -2.0 * raw))
-
-
-def _entropy(n: int, log_sigma: np.ndarray | None, branch_probs: list[np.ndarray]) -> np.ndarray:
-    """float32 [n]: the Gaussian's mean entropy over its dimensions *before* the tanh (the squashed
-    one has no closed form) plus each discrete branch's entropy."""
-    entropy = np.zeros(n, dtype=np.float32)
-    if log_sigma is not None:
-        entropy = entropy + np.mean(nd.gaussian_entropy(log_sigma), axis=1)
-    for probs in branch_probs:
-        entropy = entropy + nd.categorical_entropy(probs)
-    return entropy.astype(np.float32)
+def policy_entropy(rows: int, log_sigma: np.ndarray | None, branch_probs: list[np.ndarray]) -> np.ndarray:
+    """float32 [rows], for ``Policy/Entropy``: the Gaussian's mean entropy over its dimensions
+    *before* the tanh (the squashed one has no closed form) plus the entropy of each of
+    ``branch_probs`` ([rows, k] each; one array of every branch side by side sums them all)."""
+    return nd.combined_entropy(None if log_sigma is None else nd.gaussian_entropy(log_sigma),
+                               [nd.categorical_entropy(probs) for probs in branch_probs], rows)
 
 
 class SACPolicy(Policy):
@@ -73,10 +59,13 @@ class SACPolicy(Policy):
                 mu = None if mu_t is None else mu_t.cpu().numpy()
                 logits = [branch.cpu().numpy() for branch in logits_t]
         if mu is not None:
-            raw = mu if deterministic else (
-                mu + torch.randn(mu.shape, generator=self.generator).numpy() * np.exp(log_sigma))
-            log_parts.append(_numpy_squashed_log_prob(raw, mu, log_sigma))
-            continuous = np.tanh(raw).astype(np.float32, copy=False)
+            if deterministic:
+                raw, continuous = mu, np.tanh(mu)
+            else:
+                raw, continuous = nd.squashed_sample(mu, log_sigma,
+                                                     torch.randn(mu.shape, generator=self.generator).numpy())
+            log_parts.append(nd.squashed_log_prob(raw, mu, log_sigma))
+            continuous = continuous.astype(np.float32, copy=False)
         else:
             continuous = np.zeros((n, 0), dtype=np.float32)
         discrete, branch_probs = self._sample_discrete_numpy(logits, n, deterministic, log_parts)
@@ -86,7 +75,7 @@ class SACPolicy(Policy):
             continuous_raw=continuous,
             discrete=discrete,
             log_probs=log_probs.astype(np.float32, copy=False),
-            entropy_of=functools.partial(_entropy, n, log_sigma, branch_probs),
+            entropy_of=functools.partial(policy_entropy, n, log_sigma, branch_probs),
             memories=memories_out,
         )
 
@@ -97,7 +86,7 @@ class SACPolicy(Policy):
         """For the update, with gradients: (squashed actions [n, c] (reparameterised), their
         log-probs [n, c], the discrete probabilities [n, K] and log(p + eps) [n, K] of every
         option; None for an absent action kind), and without: the policy's entropy per row, float32
-        [n] (``_entropy``, for ``Policy/Entropy``). A recurrent actor reads the n rows as sequences
+        [n] (``policy_entropy``). A recurrent actor reads the n rows as sequences
         of ``sequence_length`` starting from ``memories`` [1, n / sequence_length, m]."""
         if memories is not None:
             encoding, _ = self.actor.network_body.forward_memory(obs, memories, sequence_length)
@@ -108,12 +97,11 @@ class SACPolicy(Policy):
         if mu is not None:
             log_sigma = self.actor.log_sigma_of(encoding, mu)
             noise = torch.randn(mu.shape, generator=generator, device=mu.device)
-            raw = mu + noise * torch.exp(log_sigma)
-            actions = torch.tanh(raw)
+            raw, actions = squashed_sample(mu, log_sigma, noise)
             log_probs = squashed_log_prob(raw, mu, log_sigma)
         if logits:
             probs = torch.cat([torch.softmax(branch, dim=1) for branch in logits], dim=1)
-            all_log_probs = torch.log(probs + EPSILON)
-        entropy = _entropy(len(encoding), None if log_sigma is None else log_sigma.detach().cpu().numpy(),
-                           [] if probs is None else [probs.detach().cpu().numpy()])  # all branches: their sum
+            all_log_probs = categorical_option_log_probs(probs)
+        entropy = policy_entropy(len(encoding), None if log_sigma is None else log_sigma.detach().cpu().numpy(),
+                                 [] if probs is None else [probs.detach().cpu().numpy()])  # all branches: their sum
         return actions, log_probs, probs, all_log_probs, entropy
