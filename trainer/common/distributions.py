@@ -1,6 +1,6 @@
 """Log-probabilities and entropies of the action distributions, as pure torch functions.
 
-The small constant EPSILON matches ML-Agents so log-probs and entropies agree numerically.
+The small constant EPSILON (numpy_distributions.py) matches ML-Agents so log-probs and entropies agree.
 Shapes: n = batch, c = continuous dimensions, k = options of one discrete branch.
 """
 from __future__ import annotations
@@ -9,9 +9,9 @@ import math
 
 import torch
 
-EPSILON = 1e-7
+from trainer.common.numpy_distributions import EPSILON, MASKED_LOGIT_OFFSET
+
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
-MASKED_LOGIT_OFFSET = 1e8
 
 
 def gaussian_log_prob(actions: torch.Tensor, mu: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:

@@ -36,9 +36,9 @@ import torch
 from trainer.common import numpy_distributions as nd
 from trainer.common import numpy_net
 from trainer.common.distributions import EPSILON
-from trainer.common.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN
+from trainer.common.numpy_net import LOG_SIGMA_MAX, LOG_SIGMA_MIN
 from trainer.sac import losses
-from trainer.sac.policy import _entropy, _numpy_squashed_log_prob
+from trainer.common.numpy_policy import squashed_entropy as _entropy, squashed_log_prob as _numpy_squashed_log_prob
 
 
 def supports(trainer) -> bool:

@@ -4,44 +4,21 @@ continuous actions and the PPO policy's categorical sampling for discrete branch
 The environment receives tanh(sample) in (-1, 1) (no clipping), and the same squashed action is
 what the replay buffer stores (``continuous_raw``): the Q networks take squashed actions.
 Deterministic acting uses tanh(mu). As for PPO, vector-observation actors on the CPU decide in
-numpy (numpy_net.py says why), drawing noise from the same torch generator. With
+numpy (numpy_net.py says why); both draw their noise in trainer/common/numpy_policy.py. With
 network_settings.memory the actor's LSTM state travels with each agent as PPO's does (``act``
 takes and returns memories; ``sample_with_grad`` reads rows as sequences).
 """
 from __future__ import annotations
 
-import functools
 from typing import Sequence
 
 import numpy as np
 import torch
 
-from protos.types import ActionTuple
-from trainer.common import numpy_distributions as nd
 from trainer.common.distributions import EPSILON
-from trainer.common.policy import Policy, PolicyOutput, allowed_from_mask
+from trainer.common.numpy_policy import PolicyOutput, squashed_entropy as _entropy
+from trainer.common.policy import Policy, allowed_from_mask
 from trainer.sac.losses import squashed_log_prob
-
-_LOG_2 = np.log(2.0)
-
-
-def _numpy_squashed_log_prob(raw: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
-    """losses.squashed_log_prob in numpy: the Gaussian's log-density less the tanh's log |Jacobian|
-    (float64, as SAC's numpy paths have always computed it). [n, c] -> [n, c]."""
-    gaussian = nd.gaussian_log_prob(raw, mu, log_sigma, float64_constant=True)
-    return gaussian - 2.0 * (_LOG_2 - raw - np.logaddexp(0.0, -2.0 * raw))
-
-
-def _entropy(n: int, log_sigma: np.ndarray | None, branch_probs: list[np.ndarray]) -> np.ndarray:
-    """float32 [n]: the Gaussian's mean entropy over its dimensions *before* the tanh (the squashed
-    one has no closed form) plus each discrete branch's entropy."""
-    entropy = np.zeros(n, dtype=np.float32)
-    if log_sigma is not None:
-        entropy = entropy + np.mean(nd.gaussian_entropy(log_sigma), axis=1)
-    for probs in branch_probs:
-        entropy = entropy + nd.categorical_entropy(probs)
-    return entropy.astype(np.float32)
-
 
 class SACPolicy(Policy):
     SQUASHED = True
@@ -51,44 +28,24 @@ class SACPolicy(Policy):
         """Actions for n agents in one forward pass (see Policy.act for the arguments)."""
         deterministic = deterministic or self.hyperparams.deterministic
         n = len(obs[0])
-        log_parts: list[np.ndarray] = []
-        memories_out = None
         if self._numpy_actor is not None:
-            h, memories_out = self._numpy_actor.hidden(list(obs), memories)
-            mu, logits = self._numpy_actor.heads_of(h, action_mask)
-            log_sigma = self._numpy_actor.log_sigma_of(h) if mu is not None else None
-        else:
-            with torch.inference_mode():
-                if self.memory_size:
-                    memory_in = (torch.zeros((n, self.memory_size)) if memories is None
-                                 else torch.as_tensor(np.asarray(memories, dtype=np.float32)))
-                    encoding, memories_t = self.actor.network_body.forward_memory(
-                        self._to_tensors(obs), memory_in.to(self.device).unsqueeze(0), 1)
-                    memories_out = memories_t[0].cpu().numpy()
-                else:
-                    encoding = self.actor.network_body(self._to_tensors(obs))
-                allowed = allowed_from_mask(action_mask)
-                mu_t, logits_t = self.actor.heads_of(encoding, None if allowed is None else allowed.to(self.device))
-                log_sigma = None if mu_t is None else self.actor.log_sigma_of(encoding, mu_t).cpu().numpy()
-                mu = None if mu_t is None else mu_t.cpu().numpy()
-                logits = [branch.cpu().numpy() for branch in logits_t]
-        if mu is not None:
-            raw = mu if deterministic else (
-                mu + torch.randn(mu.shape, generator=self.generator).numpy() * np.exp(log_sigma))
-            log_parts.append(_numpy_squashed_log_prob(raw, mu, log_sigma))
-            continuous = np.tanh(raw).astype(np.float32, copy=False)
-        else:
-            continuous = np.zeros((n, 0), dtype=np.float32)
-        discrete, branch_probs = self._sample_discrete_numpy(logits, n, deterministic, log_parts)
-        log_probs = np.concatenate(log_parts, axis=1) if log_parts else np.zeros((n, 0), np.float32)
-        return PolicyOutput(
-            env_actions=ActionTuple(continuous, discrete),
-            continuous_raw=continuous,
-            discrete=discrete,
-            log_probs=log_probs.astype(np.float32, copy=False),
-            entropy_of=functools.partial(_entropy, n, log_sigma, branch_probs),
-            memories=memories_out,
-        )
+            return self.sampler.act(obs, action_mask, deterministic, memories)
+        memories_out = None
+        with torch.inference_mode():
+            if self.memory_size:
+                memory_in = (torch.zeros((n, self.memory_size)) if memories is None
+                             else torch.as_tensor(np.asarray(memories, dtype=np.float32)))
+                encoding, memories_t = self.actor.network_body.forward_memory(
+                    self._to_tensors(obs), memory_in.to(self.device).unsqueeze(0), 1)
+                memories_out = memories_t[0].cpu().numpy()
+            else:
+                encoding = self.actor.network_body(self._to_tensors(obs))
+            allowed = allowed_from_mask(action_mask)
+            mu_t, logits_t = self.actor.heads_of(encoding, None if allowed is None else allowed.to(self.device))
+            log_sigma = None if mu_t is None else self.actor.log_sigma_of(encoding, mu_t).cpu().numpy()
+            mu = None if mu_t is None else mu_t.cpu().numpy()
+            logits = [branch.cpu().numpy() for branch in logits_t]
+        return self.sampler.sample_squashed(mu, log_sigma, logits, n, deterministic, memories_out)
 
     def sample_with_grad(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None, generator: torch.Generator,
                          memories: torch.Tensor | None = None, sequence_length: int = 1
