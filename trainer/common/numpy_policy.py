@@ -104,6 +104,11 @@ class NumpyPolicy:
                  deterministic: bool = False) -> None:
         self.actor, self.noise, self.squashed, self.deterministic = actor, noise, squashed, deterministic
 
+    @property
+    def memory_size(self) -> int:
+        """> 0: a recurrent actor; ``act`` takes and returns each agent's memory."""
+        return 0 if self.actor is None else self.actor.body.memory_size
+
     def act(self, obs: Sequence[np.ndarray], action_mask: np.ndarray | None = None,
             deterministic: bool = False, memories: np.ndarray | None = None) -> PolicyOutput:
         """Actions for n agents in one forward pass. obs: one float32 array [n, size_i] per
