@@ -63,7 +63,7 @@ def run(tmp_path, mode: str, task: str, behavior: str, trainer: str, env: dict, 
     folder.mkdir()
     config = folder / "c.yaml"
     config.write_text(textwrap.dedent(CONFIG.format(
-        behavior=behavior, trainer=trainer, hyper=PPO if trainer == "ppo" else SAC,
+        behavior=behavior, trainer=trainer, hyper=SAC if trainer == "sac" else PPO,
         normalize=str(normalize).lower(), steps=400, horizon=16)))
     (folder / "driver.py").write_text(DRIVER)
     seen = folder / "seen.json"
@@ -77,7 +77,8 @@ def run(tmp_path, mode: str, task: str, behavior: str, trainer: str, env: dict, 
 
 
 @pytest.mark.parametrize("task, behavior, trainer, normalize", [
-    ("basic", "Basic", "ppo", False), ("ball3d", "3DBall", "ppo", True), ("basic", "Basic", "sac", False)])
+    ("basic", "Basic", "ppo", False), ("ball3d", "3DBall", "ppo", True), ("basic", "Basic", "sac", False),
+    ("pushblock", "PushBlock", "poca", True)])
 def test_first_actions_go_out_before_torch_and_the_run_is_unchanged(tmp_path, env_no_proxy, task, behavior,
                                                                    trainer, normalize):
     late_seen, late = run(tmp_path, "late", task, behavior, trainer, env_no_proxy, normalize)

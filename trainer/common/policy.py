@@ -59,7 +59,6 @@ class Policy:
         self.action_spec = behavior_spec.action_spec
         self.hyperparams = hyperparams
         self.device = torch.device(device)
-        self.seed = seed
         initial = initial_actor(behavior_spec, hyperparams, self.SQUASHED, seed)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)

@@ -20,6 +20,7 @@ from trainer.common.numpy_policy import PolicyOutput, squashed_entropy as _entro
 from trainer.common.policy import Policy, allowed_from_mask
 from trainer.sac.losses import squashed_log_prob
 
+
 class SACPolicy(Policy):
     SQUASHED = True
 
