@@ -129,8 +129,8 @@ class BehaviorRunner:
     resumed_next_summary: int | None = None  # from the checkpoint's "Summaries" entry (--resume)
     writes_files: bool = True  # False on data-parallel ranks other than 0 (trainer/distributed.py)
     self_play: SelfPlay | None = None  # ``self_play:`` while training (trainer/selfplay.py)
-    # (brain, onnx path, step) after each checkpoint is written: --record-video's clip
-    on_checkpoint: Callable[[str, str, int], object] | None = None
+    # (brain, onnx path, step, final) after each checkpoint is written: --record-video's clip
+    on_checkpoint: Callable[[str, str, int, bool], object] | None = None
 
     @classmethod
     def create(cls, brain: str, spec: BehaviorSpec, settings, run_dir: str, seed: int, device: str,
@@ -383,5 +383,5 @@ class BehaviorRunner:
                 steps=step, file_path=self.paths.final_onnx, reward=reward, creation_time=entry.creation_time,
                 auxillary_file_paths=[pt_path]))
         if self.on_checkpoint is not None:
-            self.on_checkpoint(self.brain, onnx_path, step)
+            self.on_checkpoint(self.brain, onnx_path, step, final)
         return onnx_path

@@ -414,6 +414,10 @@ class RunState:
                     env_stats.setdefault(key, []).append((value, agg))
                 self.reporter.record_environment_stats(brains, env_stats, env_id)
 
+    def environment_side_channel(self) -> bytes:
+        """The current lessons' environment parameters as side-channel messages (--record-video's clips)."""
+        return sc.pack_messages(environment_parameter_messages(self.params))
+
     def initial_side_channel(self, env_id: int = 0) -> bytes:
         msgs = environment_parameter_messages(self.params) + engine_config_messages(self.options.engine_settings)
         return sc.pack_messages(msgs)
@@ -488,7 +492,8 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
                          make_routers(env.num_envs), env_vars, behavior_recorder(options))
         if ck.record_video and main:
-            state.clips = ClipRecorder.for_env(env.env_path, env.seed)
+            state.clips = ClipRecorder.for_env(env.env_path, env.seed, run_dir, state.environment_side_channel,
+                                               env.env_args or ())
     except BaseException:
         pool.close()
         raise

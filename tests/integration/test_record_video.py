@@ -1,6 +1,7 @@
-"""mlagents-like-learn --record-video: each checkpoint's ONNX filmed in the background to
-<Behavior>-<step>.mp4 beside it and into TensorBoard as an animated image, read back with
-TensorBoard's own loader (EventAccumulator) and decoded."""
+"""mlagents-like-learn --record-video: checkpoints' ONNX filmed in the background (as the CPU budget
+allows, the final one always) to <Behavior>-<step>.mp4 beside it and into TensorBoard as an animated
+image, read back with TensorBoard's own loader (EventAccumulator) and decoded; the clips play the
+run's environment parameters."""
 from __future__ import annotations
 
 import io
@@ -22,6 +23,8 @@ behaviors:
     max_steps: 2400
     time_horizon: 100
     summary_freq: 1200
+environment_parameters:
+  clip_check: {sampler_type: uniform, sampler_parameters: {min_value: 1.0, max_value: 2.0}}
 """
 
 
@@ -38,10 +41,14 @@ def test_record_video_films_checkpoints_into_tensorboard(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     brain = tmp_path / "results" / "v" / "3DBall"
     clips = sorted(brain.glob("3DBall-*.mp4"))
-    assert clips, (sorted(p.name for p in brain.iterdir()), (brain / "clips.log").read_text()[-2000:])
+    log = (tmp_path / "results" / "v" / "run_logs" / "clips.log").read_text()
+    assert clips, (sorted(p.name for p in brain.iterdir()), log[-2000:])
     steps = sorted(int(p.stem.split("-")[1]) for p in clips)
     onnx_steps = {int(p.stem.split("-")[1]) for p in brain.glob("3DBall-*.onnx")}
-    assert set(steps) <= onnx_steps
+    assert set(steps) <= onnx_steps and steps[-1] == max(onnx_steps)  # the final model's clip: always made
+    # the clips play the run's environment parameters, as its simulators got them
+    assert log.count("environment parameters: clip_check~uniform(1.0, 2.0)") == len(clips), log[-2000:]
+    assert not list((brain / "clips").glob("*.onnx"))  # the models' copies are gone
     with av.open(str(clips[-1])) as container:
         frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
     assert len(frames) == 200 and frames[0].shape == (240, 320, 3)  # 10 s at 20 fps

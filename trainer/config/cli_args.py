@@ -142,8 +142,9 @@ def _add_general_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--torch", action=_Removed, help="(removed) does nothing")
     parser.add_argument("--tensorflow", action=_Removed, help="(removed) does nothing")
     _setting_flag(parser, ckpt, "results_dir", "base folder of all runs")
-    _setting_flag(parser, ckpt, "record_video", "--env stub:TASK: after each checkpoint, a background process films "
-                  "its ONNX to <Behavior>-<step>.mp4 beside it and into TensorBoard (Images)")
+    _setting_flag(parser, ckpt, "record_video", "--env stub:TASK: a background process films checkpoints' ONNX "
+                  "(as a 4 %% CPU budget allows; the final one always) to <Behavior>-<step>.mp4 beside "
+                  "them and into TensorBoard (Images)")
     _setting_flag(parser, env, "timeout_wait", "seconds to wait for each simulator message")
     _setting_flag(parser, env, "bind", "address the gRPC server binds (use 0.0.0.0 or [::] for all interfaces)")
     _setting_flag(parser, RunOptions, "batch_per_rank", "data-parallel ranks: buffer_size and batch_size are each "

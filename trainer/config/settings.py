@@ -229,7 +229,7 @@ class CheckpointSettings:
     train_model: bool = False
     inference: bool = False
     results_dir: str = "results"
-    record_video: bool = False  # --record-video: a clip of each checkpoint (trainer/artifacts/clips.py)
+    record_video: bool = False  # --record-video: clips of checkpoints in a CPU budget (trainer/artifacts/clips.py)
 
     @property
     def write_path(self) -> str:

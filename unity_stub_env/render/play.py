@@ -96,10 +96,13 @@ class Player:
     """Steps a task with a policy and hands out captioned frames of one agent."""
 
     def __init__(self, task, act: Callable, agent: int, width: int, height: int, label: str,
-                 samples: int = 4) -> None:
+                 samples: int = 4, decision_period: int | None = None) -> None:
         if not 0 <= agent < task.num_agents:
             raise RenderError(f"--agent {agent}: task {task.name!r} has agents 0..{task.num_agents - 1} in one area")
+        if decision_period is not None and decision_period < 1:
+            raise RenderError(f"--decision-period must be 1 or more, got {decision_period}")
         self.task, self.act, self.agent, self.label = task, act, agent, label
+        self.period = int(decision_period or task.decision_period)  # the stub's --decision-period, as the academy
         self.view = make_view(task, agent, width, height, samples)
         spec = task.action_spec
         self.continuous = np.zeros((task.num_agents, spec.continuous_size), np.float32)
@@ -112,7 +115,7 @@ class Player:
 
     def step(self) -> None:
         task, k = self.task, self.agent
-        if self.steps % task.decision_period == 0:
+        if self.steps % self.period == 0:
             self.continuous[:], self.discrete[:] = self.act(task.observe(), task.action_mask())
         clock = getattr(getattr(task, "data", None), "time", None)
         result = task.step(self.continuous, self.discrete)
@@ -123,7 +126,7 @@ class Player:
         self.episode_step += 1
         reward = float(result.rewards[k]) + (0.0 if result.group_rewards is None else float(result.group_rewards[k]))
         self.pending = reward if task.sets_reward else self.pending + reward
-        decision_end = self.steps % task.decision_period == 0
+        decision_end = self.steps % self.period == 0
         if decision_end or result.done[k]:
             self.episode_return += self.pending
             self.pending = 0.0
@@ -173,9 +176,15 @@ def film(player: Player, writer, fps: float, seconds: float | None = None, episo
 def play(task_name: str, policy: str, video: str, seconds: float | None = None, episodes: int | None = None,
          width: int = 640, height: int = 480, fps: float = 30.0, seed: int = 0, env_params: list[str] | None = None,
          agent: int = 0, stochastic: bool = False, tensorboard: tuple[str, str, int] | None = None,
-         samples: int = 4) -> PlayResult:
+         samples: int = 4, side_channel: bytes = b"", agents_per_area: int | None = None,
+         decision_period: int | None = None) -> PlayResult:
     """Film ``policy`` playing ``task_name`` to ``video``; RenderError for anything unusable.
-    ``tensorboard`` (folder, tag, step): also write the clip as an animated image summary there."""
+    ``tensorboard`` (folder, tag, step): also write the clip as an animated image summary there.
+    ``side_channel``: side-channel messages as a trainer sends them (a training run's environment
+    parameters, applied after ``env_params``); ``agents_per_area`` and ``decision_period``: the
+    stub's options of those names."""
+    from protos.errors import ProtocolError
+    from unity_stub_env.communicator import SideChannelState
     from unity_stub_env.record_demo import RecordError, parse_env_params
     from unity_stub_env.tasks import make_task
 
@@ -192,12 +201,13 @@ def play(task_name: str, policy: str, video: str, seconds: float | None = None, 
     check_output(video)
     try:
         params = parse_env_params(env_params)
-        task = make_task(task_name, num_areas=1, seed=seed, env_params=params)
-    except (RecordError, ValueError) as error:
+        SideChannelState(params).apply(side_channel)
+        task = make_task(task_name, num_areas=1, seed=seed, env_params=params, agents_per_area=agents_per_area)
+    except (RecordError, ProtocolError, ValueError) as error:
         raise RenderError(str(error)) from None
     act = make_policy(policy, task, seed, stochastic)
     label = f"{task_name} / {Path(policy).stem if policy.endswith('.onnx') else policy}"
-    player = Player(task, act, agent, width, height, label, samples)
+    player = Player(task, act, agent, width, height, label, samples, decision_period)
     writer = VideoWriter(video, fps)
     gif = None
     if tensorboard is not None:
