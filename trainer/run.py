@@ -161,7 +161,7 @@ class RunState:
         for torch; else only if it is loaded already), their policies continuing from the
         first-steps policies; ``trajectories`` then point at the real runners. Called before any
         trajectory is processed, so nothing learned differs (trainer/first_steps.py)."""
-        if not self.starting or not (wait or warmup.finished()):
+        if not self.starting or not (wait or self.torch_loaded or warmup.finished()):
             return
         self.load_torch()
         for brain, first in list(self.starting.items()):
