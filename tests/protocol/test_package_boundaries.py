@@ -12,6 +12,10 @@
   never import it, and the stub only its light modules (``ENVS_API_LIGHT``: the data types and
   exceptions, which themselves import nothing of the project but ``protos``).
 
+Inside ``trainer``, the shared pieces (``trainer/common/``) import no algorithm package
+(``trainer.ppo``, ``trainer.sac``, ``trainer.poca``), and PPO and SAC import neither each other nor
+POCA (POCA builds on PPO's trainer and may import it).
+
 So a bug in a shared encoder cannot hide behind one side's private copy, and either package can
 change its internals without breaking the other.
 """
@@ -139,3 +143,33 @@ def test_the_stub_imports_only_public_names_of_protos():
            for where, line, module, names in imports("unity_stub_env")
            if top(module) == "protos" and any(n.startswith("_") for n in names)]
     assert bad == []
+
+
+ALGORITHMS = ("trainer.ppo", "trainer.sac", "trainer.poca")
+
+
+def imported_modules(package: str) -> list[tuple[str, int, str]]:
+    """(file, line, module) for every import under ``package``; ``from trainer import ppo`` names
+    the module ``trainer.ppo``."""
+    found = []
+    for where, line, module, names in imports(package):
+        found.append((where, line, module))
+        found += [(where, line, f"{module}.{name}") for name in names]
+    return found
+
+
+def in_package(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+@pytest.mark.parametrize("package, forbidden", [
+    ("trainer/common", ALGORITHMS),
+    ("trainer/ppo", ("trainer.sac", "trainer.poca")),
+    ("trainer/sac", ("trainer.ppo", "trainer.poca")),
+])
+def test_the_common_package_imports_no_algorithm_and_ppo_and_sac_not_each_other(package, forbidden):
+    bad = [f"{where}:{line} imports {module}" for where, line, module in imported_modules(package)
+           if any(in_package(module, other) for other in forbidden)]
+    assert bad == []
+    assert any(in_package(module, "trainer.common") or package == "trainer/common"
+               for _, _, module in imported_modules(package))  # the scan sees the package's imports

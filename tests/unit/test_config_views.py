@@ -1,5 +1,6 @@
-"""The algorithms' flat views (PPOHyperparams, SACHyperparams, SignalNetwork) are generated from the settings
-classes and filled from one behavior's TrainerSettings with no hand mapper."""
+"""The flat views (the shared NetworkHyperparams and SignalNetwork, the algorithms' PPOHyperparams and
+SACHyperparams on top of the first) are generated from the settings classes and filled from one
+behavior's TrainerSettings with no hand mapper."""
 from __future__ import annotations
 
 import dataclasses
@@ -9,7 +10,8 @@ import pytest
 
 from trainer.config import run_options_from_dict
 from trainer.config.settings import NetworkSettings, PPOSettings, SACSettings
-from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
+from trainer.common.hyperparams import NetworkHyperparams, SignalNetwork
+from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.sac.hyperparams import SACHyperparams
 
 
@@ -79,3 +81,20 @@ def test_views_are_frozen_dataclasses_that_pickle():
     assert pickle.loads(pickle.dumps(hp)) == hp
     assert dataclasses.replace(hp, batch_size=8).batch_size == 8
     assert PPOHyperparams().reward_signals is not PPOHyperparams().reward_signals  # no shared mutable default
+
+
+def test_the_algorithm_views_and_the_signal_networks_are_the_shared_network_view():
+    for view in (PPOHyperparams, SACHyperparams, SignalNetwork):
+        assert issubclass(view, NetworkHyperparams)
+    network = {f.name for f in dataclasses.fields(NetworkHyperparams)}
+    assert network == {f.name for f in dataclasses.fields(NetworkSettings)} - {"memory"} | {
+        "memory_size", "sequence_length"}
+    hp = PPOHyperparams.from_settings(behavior({
+        "trainer_type": "ppo",
+        "network_settings": {"memory": {"memory_size": 16, "sequence_length": 8}},
+        "reward_signals": {"extrinsic": {}, "rnd": {"network_settings": {
+            "hidden_units": 24, "memory": {"memory_size": 32, "sequence_length": 4}}}},
+    }))
+    assert (hp.memory_size, hp.sequence_length) == (16, 8)
+    rnd = hp.reward_signal_networks["rnd"]  # the reference ignores memory in the signals' encoders
+    assert (type(rnd), rnd.hidden_units, rnd.memory_size, rnd.sequence_length) == (SignalNetwork, 24, 0, 64)

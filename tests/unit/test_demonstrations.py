@@ -21,7 +21,8 @@ from trainer.behavioral_cloning import BehavioralCloning
 from trainer.config.settings import BehavioralCloningSettings
 from trainer.demonstrations import DemoExperiences, check_demo_paths, load_demonstrations
 from trainer.errors import ConfigError
-from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
+from trainer.common.hyperparams import SignalNetwork
+from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.common.policy import Policy
 from trainer.common.reward_providers import Experience, GAILProvider
 from trainer.ppo.trainer import PPOTrainer
@@ -206,9 +207,8 @@ def _experience(demo: DemoExperiences, rows, raw_scale: float = 3.0) -> Experien
 
 def _gail(spec, **network) -> GAILProvider:
     torch.manual_seed(0)
-    hyper = PPOHyperparams(hidden_units=32, num_layers=2)
-    return GAILProvider(spec, hyper, 1.0, SignalNetwork(learning_rate=1e-3, hidden_units=32, num_layers=2,
-                                                        normalize=True, **network))
+    return GAILProvider(spec, 1.0, SignalNetwork(learning_rate=1e-3, hidden_units=32, num_layers=2,
+                                                 normalize=True, **network))
 
 
 def test_gail_reward_is_minus_log_one_minus_d():

@@ -34,7 +34,7 @@ def t(a):
 def test_the_names_mirror_distributions_py():
     torch_names = {name for name in dir(td) if not name.startswith("_") and callable(getattr(td, name))
                    and getattr(td, name).__module__ == td.__name__}
-    assert torch_names - {"combined_entropy"} <= set(nd.__all__)
+    assert torch_names <= set(nd.__all__)
     assert nd.EPSILON == td.EPSILON and nd.MASKED_LOGIT_OFFSET == td.MASKED_LOGIT_OFFSET
 
 
@@ -51,8 +51,38 @@ def test_values_equal_the_torch_functions():
     np.testing.assert_allclose(probs, torch.softmax(t(masked), dim=1).numpy(), rtol=1e-6, atol=1e-7)
     np.testing.assert_array_equal(nd.categorical_log_prob(probs, choice),
                                   td.categorical_log_prob(t(probs), t(choice)).numpy())
+    # numpy's and torch's log may round apart by one float32 unit on some of the K values
+    np.testing.assert_allclose(nd.categorical_option_log_probs(probs),
+                               td.categorical_option_log_probs(t(probs)).numpy(), rtol=3e-7, atol=1e-7)
     # a sum over the options: numpy and torch add in another order (one float32 rounding apart)
     np.testing.assert_allclose(nd.categorical_entropy(probs), td.categorical_entropy(t(probs)).numpy(), rtol=3e-7)
+
+
+def test_the_squashed_gaussian_equals_the_torch_functions():
+    _, mu, _, _, _, _ = arrays()
+    log_sigma = (RNG.standard_normal((N, C)) * 0.5).astype(np.float32)  # SAC's sigma is a head: per row
+    noise = RNG.standard_normal((N, C)).astype(np.float32)
+    raw, action = nd.squashed_sample(mu, log_sigma, noise)
+    raw_t, action_t = td.squashed_sample(t(mu), t(log_sigma), t(noise))
+    # numpy's and torch's exp and tanh may round apart by one float32 unit
+    np.testing.assert_allclose(raw, raw_t.numpy(), rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(action, action_t.numpy(), rtol=1e-6, atol=1e-6)
+    # float64 constant (SAC's numpy paths), and softplus vs logaddexp: a float32 rounding apart
+    np.testing.assert_allclose(nd.squashed_log_prob(raw, mu, log_sigma),
+                               td.squashed_log_prob(raw_t, t(mu), t(log_sigma)).numpy(), rtol=1e-5, atol=1e-5)
+    big = np.array([[30.0, -30.0]], np.float32)  # log |tanh'(x)| ~ log 4 - 2|x|, no overflow
+    np.testing.assert_allclose(nd.tanh_log_abs_det_jacobian(big), [[math.log(4) - 60] * 2], rtol=1e-6)
+
+
+def test_combined_entropy_equals_the_torch_function():
+    _, _, log_sigma, logits, _, _ = arrays()
+    probs = nd.softmax(logits)
+    branches = [nd.categorical_entropy(probs[:, :2]), nd.categorical_entropy(probs[:, 2:])]
+    shared = nd.combined_entropy(nd.gaussian_entropy(log_sigma), branches, N)  # sigma [1, C], as PPO's
+    expected = td.combined_entropy(td.gaussian_entropy(t(log_sigma)).expand(N, C), [t(b) for b in branches])
+    assert shared.dtype == np.float32 and shared.shape == (N,)
+    np.testing.assert_allclose(shared, expected.numpy(), rtol=1e-6)
+    np.testing.assert_array_equal(nd.combined_entropy(None, branches[:1], N), branches[0])
 
 
 def test_entropies_by_hand():
@@ -87,3 +117,20 @@ def test_gradients_equal_autograd():
     td.categorical_entropy(torch.softmax(td.mask_logits(logits_t, t(allowed)), dim=1)).sum().backward()
     np.testing.assert_allclose(nd.categorical_entropy_grad(probs) * allowed, logits_t.grad.numpy(),
                                rtol=1e-4, atol=1e-6)
+
+
+def test_squashed_sample_gradients_equal_autograd():
+    """Back through the reparameterised sample and its log-prob (SAC's policy loss reaches mu and
+    log sigma both ways), for a loss sum(g_a * a) + k * sum(log pi)."""
+    _, mu, _, _, _, _ = arrays()
+    log_sigma = (RNG.standard_normal((N, C)) * 0.5).astype(np.float32)
+    noise = RNG.standard_normal((N, C)).astype(np.float32)
+    grad_action = RNG.standard_normal((N, C)).astype(np.float32)
+    k = np.float32(0.37)
+    mu_t, ls_t = t(mu).requires_grad_(), t(log_sigma).requires_grad_()
+    raw_t, action_t = td.squashed_sample(mu_t, ls_t, t(noise))
+    ((action_t * t(grad_action)).sum() + float(k) * td.squashed_log_prob(raw_t, mu_t, ls_t).sum()).backward()
+    raw, action = nd.squashed_sample(mu, log_sigma, noise)
+    grad_mu, grad_ls = nd.squashed_sample_grads(raw, action, mu, log_sigma, noise, grad_action, k)
+    np.testing.assert_allclose(grad_mu, mu_t.grad.numpy(), rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(grad_ls, ls_t.grad.numpy(), rtol=1e-4, atol=1e-5)

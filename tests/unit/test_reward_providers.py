@@ -11,7 +11,8 @@ import torch
 
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from tests.unit.test_ppo_trainer import expected_advantages, make_trajectory
-from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
+from trainer.common.hyperparams import SignalNetwork
+from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.common.reward_providers import CuriosityProvider, Experience, RNDProvider
 from trainer.ppo.trainer import PPOTrainer
 
@@ -19,7 +20,6 @@ SPEC = BehaviorSpec(
     (ObservationSpec((3,), (DimensionProperty.NONE,), ObservationType.DEFAULT, "vector"),),
     ActionSpec(2, (3, 2)),  # hybrid: both inverse-model heads and the one-hot flattening
 )
-BASE = PPOHyperparams(hidden_units=16, num_layers=1)
 NET = SignalNetwork(learning_rate=1e-3, hidden_units=8, num_layers=2)
 
 
@@ -68,7 +68,7 @@ def curiosity_by_hand(provider, exp):
 
 def test_curiosity_reward_is_zero_until_the_first_update_then_the_capped_forward_error():
     torch.manual_seed(0)
-    provider = CuriosityProvider(SPEC, BASE, strength=0.5, network=NET)
+    provider = CuriosityProvider(SPEC, strength=0.5, network=NET)
     exp = experience()
     assert provider.evaluate(exp).tolist() == [0.0] * 6  # no update yet: no curiosity
     forward_error, inverse = curiosity_by_hand(provider, exp)
@@ -77,7 +77,7 @@ def test_curiosity_reward_is_zero_until_the_first_update_then_the_capped_forward
     assert stats["Losses/Curiosity Inverse Loss"] == pytest.approx(inverse, rel=1e-5)
     forward_error, _ = curiosity_by_hand(provider, exp)  # weights moved: evaluate with the new ones
     np.testing.assert_allclose(provider.evaluate(exp), np.minimum(forward_error, 1 / 0.5), rtol=1e-5)
-    low = CuriosityProvider(SPEC, BASE, strength=50.0, network=NET)  # cap 1/strength = 0.02
+    low = CuriosityProvider(SPEC, strength=50.0, network=NET)  # cap 1/strength = 0.02
     low.update(exp)
     capped = low.evaluate(exp)
     assert capped.max() <= 0.02 + 1e-9 and np.isclose(capped, 0.02).any()
@@ -85,7 +85,7 @@ def test_curiosity_reward_is_zero_until_the_first_update_then_the_capped_forward
 
 def test_curiosity_learns_its_transitions():
     torch.manual_seed(1)
-    provider = CuriosityProvider(SPEC, BASE, strength=1.0, network=NET)
+    provider = CuriosityProvider(SPEC, strength=1.0, network=NET)
     exp = experience(32, seed=3)
     first = [provider.update(exp) for _ in range(200)]
     assert first[-1]["Losses/Curiosity Forward Loss"] < 0.5 * first[0]["Losses/Curiosity Forward Loss"]
@@ -94,7 +94,7 @@ def test_curiosity_learns_its_transitions():
 
 def test_rnd_reward_is_the_prediction_error_and_training_lowers_it():
     torch.manual_seed(2)
-    provider = RNDProvider(SPEC, BASE, strength=1.0, network=NET)
+    provider = RNDProvider(SPEC, strength=1.0, network=NET)
     exp = experience(16, seed=4)
     target_before = weights(provider.target)
     w_t, w_p = weights(provider.target), weights(provider.predictor)
@@ -109,7 +109,7 @@ def test_rnd_reward_is_the_prediction_error_and_training_lowers_it():
 
 def test_rnd_normalisers_follow_every_pass_when_asked():
     torch.manual_seed(3)
-    provider = RNDProvider(SPEC, BASE, strength=1.0, network=replace(NET, normalize=True))
+    provider = RNDProvider(SPEC, strength=1.0, network=replace(NET, normalize=True))
     exp = experience(10, seed=5)
     provider.evaluate(exp)
     provider.update(exp)

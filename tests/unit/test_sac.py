@@ -11,6 +11,7 @@ import torch
 from torch import nn
 
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
+from trainer.common import distributions
 from trainer.common.trajectory import Trajectory
 from trainer.sac import losses
 from trainer.sac.hyperparams import SACHyperparams
@@ -54,9 +55,9 @@ def test_squashed_log_prob_is_the_change_of_variables():
     # raw = 0.5 ~ N(0, 1): log N = -0.125 - 0.9189385 ; log |d tanh/dx| = log(1 - tanh(0.5)^2)
     raw, mu, log_sigma = torch.tensor([[0.5]]), torch.zeros(1, 1), torch.zeros(1, 1)
     expected = -0.125 - 0.5 * math.log(2 * math.pi) - math.log(1 - math.tanh(0.5) ** 2)
-    assert losses.squashed_log_prob(raw, mu, log_sigma).item() == pytest.approx(expected, abs=1e-5)
+    assert distributions.squashed_log_prob(raw, mu, log_sigma).item() == pytest.approx(expected, abs=1e-5)
     # stable where 1 - tanh^2 underflows: log(4) - 2|x| for large |x|
-    assert losses.tanh_log_abs_det_jacobian(torch.tensor([30.0])).item() == pytest.approx(math.log(4) - 60, rel=1e-6)
+    assert distributions.tanh_log_abs_det_jacobian(torch.tensor([30.0])).item() == pytest.approx(math.log(4) - 60, rel=1e-6)
 
 
 def test_chosen_q_and_branch_sums():

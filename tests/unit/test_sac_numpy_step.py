@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
-from trainer.ppo.hyperparams import SignalNetwork
+from trainer.common.hyperparams import SignalNetwork
 from trainer.sac import numpy_step
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.trainer import SACTrainer, copy_normalization

@@ -12,7 +12,7 @@ import torch
 
 from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, ObservationSpec, ObservationType
 from trainer.common.trajectory import Trajectory
-from trainer.ppo.hyperparams import SignalNetwork
+from trainer.common.hyperparams import SignalNetwork
 from trainer.sac import losses
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.trainer import SACTrainer

@@ -9,7 +9,8 @@ from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, Observatio
 from trainer.common.reward_providers import RewardProvider
 from trainer.common.trainer_interface import Trainer
 from trainer.poca.trainer import POCATrainer
-from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
+from trainer.common.hyperparams import SignalNetwork
+from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.ppo.trainer import PPOTrainer
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.trainer import SACTrainer

@@ -21,7 +21,7 @@ from torch import nn
 from trainer.errors import ConfigError
 from trainer.common.distributions import mask_logits
 from trainer.common.encoders import VectorInput, make_visual_encoder
-from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.common.hyperparams import NetworkHyperparams
 from trainer.common.initial_parameters import (BRANCH_GAIN, KAIMING_NORMAL, MODEL_EXPORT_VERSION, MU_GAIN,
                                                XAVIER_UNIFORM, lstm_parameters)
 from trainer.common.layers import hidden_layers, linear_layer, torch_seeded_rng
@@ -30,7 +30,7 @@ from protos.types import ActionSpec, ObservationSpec
 
 
 
-def check_network_settings(hyperparams: PPOHyperparams) -> None:
+def check_network_settings(hyperparams: NetworkHyperparams) -> None:
     if hyperparams.memory_size % 2 or hyperparams.memory_size < 0:
         raise ConfigError(f"network_settings.memory.memory_size must be even, got {hyperparams.memory_size}")
 
@@ -91,7 +91,7 @@ class ObservationEncoder(nn.Module):
 class NetworkBody(nn.Module):
     """Observation encoders -> hidden layers. [n, *shape_i] ... -> [n, hidden_units]."""
 
-    def __init__(self, observation_specs: Sequence[ObservationSpec], hyperparams: PPOHyperparams,
+    def __init__(self, observation_specs: Sequence[ObservationSpec], hyperparams: NetworkHyperparams,
                  action_size: int = 0):
         super().__init__()
         check_network_settings(hyperparams)
@@ -143,7 +143,7 @@ class Actor(nn.Module):
     """
 
     def __init__(self, observation_specs: Sequence[ObservationSpec], action_spec: ActionSpec,
-                 hyperparams: PPOHyperparams, squashed: bool = False):
+                 hyperparams: NetworkHyperparams, squashed: bool = False):
         super().__init__()
         self.action_spec = action_spec
         self.squashed = squashed  # SAC: state-dependent sigma, tanh-squashed samples
@@ -219,7 +219,7 @@ class Critic(nn.Module):
     """
 
     def __init__(self, observation_specs: Sequence[ObservationSpec], reward_signal_names: Sequence[str],
-                 hyperparams: PPOHyperparams, shared_body: NetworkBody | None = None,
+                 hyperparams: NetworkHyperparams, shared_body: NetworkBody | None = None,
                  action_size: int = 0, outputs_per_signal: int = 1):
         super().__init__()
         self.shared = shared_body is not None

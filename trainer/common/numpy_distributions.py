@@ -2,14 +2,16 @@
 
 Every numpy path computes the action distributions here: acting (common/policy.py and
 sac/policy.py), PPO's minibatch step (ppo/numpy_update.py) and SAC's gradient step
-(sac/numpy_step.py). The expressions are those of the torch functions in the same order, so a
+(sac/numpy_step.py), whose reparameterised squashed sample takes its gradient from
+``squashed_sample_grads``. The expressions are those of the torch functions in the same order, so a
 value here equals the torch one computed in float32 (a sum over options may round once
 differently: numpy adds in another order); tests/unit/test_numpy_distributions.py checks every
 value against distributions.py and every gradient against autograd.
 
 One deliberate difference, ``float64_constant``: acting and SAC's step have subtracted the
 Gaussian's log sqrt(2 pi) in float64 since they were written, PPO's update (like torch) in
-float32. Each path keeps its own so that the same seed still gives the same numbers.
+float32. Each path keeps its own so that the same seed still gives the same numbers (the squashed
+Gaussian's log-prob is SAC's only, so float64 there).
 
 Shapes: n = batch, c = continuous dimensions, k = options of one discrete branch.
 """
@@ -25,12 +27,14 @@ EPSILON = 1e-7  # as ML-Agents, so log-probs and entropies agree numerically
 MASKED_LOGIT_OFFSET = 1e8
 LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))  # a Python float: float32 arithmetic, as torch's
 _LOG_SQRT_2PI_FLOAT64 = np.float64(0.5 * np.log(2 * np.pi))
+_LOG_2 = np.log(2.0)
 TWO_PI_E = 2 * math.pi * math.e
 _MAX, _SUM = np.maximum.reduce, np.add.reduce  # ndarray.max/sum without their Python wrappers
 
 __all__ = ["EPSILON", "MASKED_LOGIT_OFFSET", "gaussian_log_prob", "gaussian_log_prob_grads", "gaussian_entropy",
-           "gaussian_entropy_grad", "mask_logits", "softmax", "categorical_log_prob", "categorical_log_prob_grad",
-           "categorical_entropy", "categorical_entropy_grad"]
+           "gaussian_entropy_grad", "tanh_log_abs_det_jacobian", "squashed_sample", "squashed_log_prob",
+           "squashed_sample_grads", "mask_logits", "softmax", "categorical_log_prob", "categorical_log_prob_grad",
+           "categorical_option_log_probs", "categorical_entropy", "categorical_entropy_grad", "combined_entropy"]
 
 
 # ---------------------------------------------------------------------------------- Gaussian
@@ -66,6 +70,40 @@ def gaussian_entropy_grad(log_sigma: np.ndarray) -> np.ndarray:
     return TWO_PI_E * sigma ** 2 / (TWO_PI_E * sigma ** 2 + EPSILON)
 
 
+# ---------------------------------------------------------------------------------- squashed (SAC)
+def tanh_log_abs_det_jacobian(raw: np.ndarray) -> np.ndarray:
+    """log |d tanh(x) / dx| = 2 (log 2 - x - softplus(-2x)), stable for large |x|. [n, c] -> [n, c]."""
+    return 2.0 * (_LOG_2 - raw - np.logaddexp(0.0, -2.0 * raw))
+
+
+def squashed_sample(mu: np.ndarray, log_sigma: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reparameterised sample of a tanh-squashed Gaussian: (raw = mu + noise sigma, tanh(raw)). [n, c] each."""
+    raw = mu + noise * np.exp(log_sigma)
+    return raw, np.tanh(raw)
+
+
+def squashed_log_prob(raw: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
+    """Per-dimension log-density of tanh(raw) with raw ~ N(mu, sigma), float64. [n, c] -> [n, c]."""
+    return gaussian_log_prob(raw, mu, log_sigma, float64_constant=True) - tanh_log_abs_det_jacobian(raw)
+
+
+def squashed_sample_grads(raw: np.ndarray, action: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray,
+                          noise: np.ndarray, grad_action: np.ndarray, grad_log_prob: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """Back through ``squashed_sample`` and the ``squashed_log_prob`` of its sample, with the noise
+    held: ``grad_action`` (d loss / d tanh(raw), [n, c]) and ``grad_log_prob`` (d loss / d log-prob,
+    broadcast to [n, c]) -> (d loss / d mu [n, c], d loss / d log_sigma [n, c])."""
+    # d log-prob / d raw = 2 tanh(raw) - d log N / d mu; raw moves with mu (1) and log_sigma (noise sigma)
+    sigma = np.exp(log_sigma)
+    diff = raw - mu
+    denom = 2.0 * sigma ** 2 + EPSILON
+    gauss = 2.0 * diff / denom  # d log N / d mu = -d log N / d raw
+    grad_raw = grad_action * (1.0 - action ** 2) + grad_log_prob * (2.0 * action - gauss)
+    grad_mu = grad_raw + grad_log_prob * gauss
+    grad_sigma = noise * grad_raw + grad_log_prob * (diff ** 2 * 4.0 * sigma / denom ** 2 - 1.0 / (sigma + EPSILON))
+    return grad_mu, sigma * grad_sigma
+
+
 # ---------------------------------------------------------------------------------- categorical
 def mask_logits(logits: np.ndarray, allowed: np.ndarray) -> np.ndarray:
     """logits * allowed - 1e8 * (1 - allowed). logits, allowed (float, 1 = allowed) [n, k] -> [n, k]."""
@@ -93,6 +131,11 @@ def categorical_log_prob_grad(probs: np.ndarray, actions: np.ndarray, grad: np.n
     return (grad * chosen / (chosen + EPSILON))[:, None] * (onehot - probs)
 
 
+def categorical_option_log_probs(probs: np.ndarray) -> np.ndarray:
+    """log(p + EPSILON) of every option (SAC's losses weigh each option). probs [n, k] -> [n, k]."""
+    return np.log(probs + EPSILON)
+
+
 def categorical_entropy(probs: np.ndarray) -> np.ndarray:
     """-sum_k p log(p + EPSILON). probs [n, k] -> [n]."""
     return -np.sum(probs * np.log(probs + EPSILON), axis=1)
@@ -103,3 +146,15 @@ def categorical_entropy_grad(probs: np.ndarray) -> np.ndarray:
     # d/dp_j of -sum p log(p + eps) = -log(p_j + eps) - p_j / (p_j + eps), then through the softmax
     d_entropy = -np.log(probs + EPSILON) - probs / (probs + EPSILON)
     return probs * (d_entropy - np.sum(probs * d_entropy, axis=1, keepdims=True))
+
+
+def combined_entropy(continuous_entropy: np.ndarray | None, discrete_entropies: list[np.ndarray], rows: int
+                     ) -> np.ndarray:
+    """Policy entropy per agent, float32 [rows]: mean over the Gaussian's dimensions ([rows, c], or
+    [1, c] for a state-independent sigma) plus the sum of the branch entropies ([rows] each)."""
+    total = np.zeros(rows, dtype=np.float32)
+    if continuous_entropy is not None:
+        total = total + np.mean(continuous_entropy, axis=1)
+    for branch_entropy in discrete_entropies:
+        total = total + branch_entropy
+    return total.astype(np.float32)

@@ -255,8 +255,8 @@ class NumpyCritic(_NumpyModule):
 
 def _gaussian_terms(log_sigma: np.ndarray) -> tuple:
     """What acting needs of log_sigma [1, c] besides the log-prob: sigma (to scale the noise) and
-    the entropy's mean over the dimensions."""
-    return np.exp(log_sigma), np.mean(numpy_distributions.gaussian_entropy(log_sigma))
+    the entropy per dimension [1, c]."""
+    return np.exp(log_sigma), numpy_distributions.gaussian_entropy(log_sigma)
 
 
 class NumpyActor(_NumpyModule):

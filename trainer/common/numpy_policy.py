@@ -26,7 +26,6 @@ from trainer.common.numpy_net import NumpyActor
 
 CONTINUOUS_CLIP = 3.0
 _MAX, _SUM = np.maximum.reduce, np.add.reduce  # ndarray.max/sum without their Python wrappers
-_LOG_2 = np.log(2.0)
 
 
 def noise_generator(seed: int) -> np.random.Generator:
@@ -71,29 +70,17 @@ class PolicyOutput:
         return self.entropy_of()
 
 
-def _entropy(n: int, gaussian_mean: float | np.ndarray | None, branch_probs: list[np.ndarray]) -> np.ndarray:
-    """float32 [n]: the Gaussian's mean entropy over its dimensions (a number, or one per row;
-    None without continuous actions) plus each discrete branch's entropy."""
-    entropy = np.zeros(n, dtype=np.float32)
-    if gaussian_mean is not None:
-        entropy = entropy + gaussian_mean
-    for probs in branch_probs:
-        entropy = entropy + nd.categorical_entropy(probs)
-    return entropy.astype(np.float32)
+def _entropy(n: int, continuous_entropy: np.ndarray | None, branch_probs: list[np.ndarray]) -> np.ndarray:
+    """float32 [n]: the Gaussian's entropy per dimension ([1, c] or [n, c]; None without continuous
+    actions) averaged, plus each discrete branch's entropy."""
+    return nd.combined_entropy(continuous_entropy, [nd.categorical_entropy(probs) for probs in branch_probs], n)
 
 
 def squashed_entropy(n: int, log_sigma: np.ndarray | None, branch_probs: list[np.ndarray]) -> np.ndarray:
-    """SAC: the Gaussian's mean entropy *before* the tanh (the squashed one has no closed form),
-    log_sigma [n, c], plus each discrete branch's entropy. float32 [n]."""
-    mean = None if log_sigma is None else np.mean(nd.gaussian_entropy(log_sigma), axis=1)
-    return _entropy(n, mean, branch_probs)
-
-
-def squashed_log_prob(raw: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
-    """trainer/sac/losses.squashed_log_prob in numpy: the Gaussian's log-density less the tanh's
-    log |Jacobian| (float64, as SAC's numpy paths have always computed it). [n, c] -> [n, c]."""
-    gaussian = nd.gaussian_log_prob(raw, mu, log_sigma, float64_constant=True)
-    return gaussian - 2.0 * (_LOG_2 - raw - np.logaddexp(0.0, -2.0 * raw))
+    """SAC, for ``Policy/Entropy``: the Gaussian's mean entropy *before* the tanh (the squashed one
+    has no closed form), log_sigma [n, c], plus the entropy of each of ``branch_probs`` ([n, k]
+    each; one array of every branch side by side sums them all). float32 [n]."""
+    return _entropy(n, None if log_sigma is None else nd.gaussian_entropy(log_sigma), branch_probs)
 
 
 class NumpyPolicy:
@@ -153,10 +140,13 @@ class NumpyPolicy:
         and the discrete branches' samples."""
         log_parts: list[np.ndarray] = []
         if mu is not None:
-            raw = mu if deterministic else (
-                mu + self.noise.standard_normal(mu.shape, dtype=np.float32) * np.exp(log_sigma))
-            log_parts.append(squashed_log_prob(raw, mu, log_sigma))
-            continuous = np.tanh(raw).astype(np.float32, copy=False)
+            if deterministic:
+                raw, continuous = mu, np.tanh(mu)
+            else:
+                raw, continuous = nd.squashed_sample(mu, log_sigma,
+                                                     self.noise.standard_normal(mu.shape, dtype=np.float32))
+            log_parts.append(nd.squashed_log_prob(raw, mu, log_sigma))
+            continuous = continuous.astype(np.float32, copy=False)
         else:
             continuous = np.zeros((n, 0), dtype=np.float32)
         discrete, branch_probs = self.sample_discrete(logits, n, deterministic, log_parts)

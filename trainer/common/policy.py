@@ -23,13 +23,13 @@ from trainer.common.distributions import (
 )
 from trainer.common.networks import Actor
 from trainer.common.numpy_policy import CONTINUOUS_CLIP, NumpyPolicy, PolicyOutput, noise_generator
-from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.common.hyperparams import NetworkHyperparams
 from protos.types import ActionTuple, BehaviorSpec
 
 __all__ = ["CONTINUOUS_CLIP", "Policy", "PolicyOutput", "allowed_from_mask", "initial_actor"]
 
 
-def initial_actor(behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams, squashed: bool, seed: int
+def initial_actor(behavior_spec: BehaviorSpec, hyperparams: NetworkHyperparams, squashed: bool, seed: int
                   ) -> dict[str, np.ndarray] | None:
     """The actor's initial state dict drawn in numpy from ``seed`` (initial_parameters.py), or
     None for visual observations (then the torch modules initialise themselves)."""
@@ -53,7 +53,7 @@ class Policy:
 
     SQUASHED = False
 
-    def __init__(self, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int,
+    def __init__(self, behavior_spec: BehaviorSpec, hyperparams: NetworkHyperparams, seed: int,
                  device: str = "cpu"):
         self.behavior_spec = behavior_spec
         self.action_spec = behavior_spec.action_spec

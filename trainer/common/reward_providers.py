@@ -4,8 +4,8 @@ Each provider turns experiences into one reward per step (``evaluate``, before `
 learns from a minibatch (``update``, its own Adam) and has a value head of its own in the
 critic. PPO and SAC share them: PPO rewards each trajectory once and updates on every PPO
 minibatch; SAC rewards every sampled replay minibatch afresh and updates on minibatches of
-their own (docs/sac.md). ``hyperparams`` is either room's dataclass (the network fields are
-named alike). Behaviour as in ML-Agents Release 22 (docs/ppo.md, "PPO details that affect results"):
+their own (docs/sac.md). Each is built from its signal's ``SignalNetwork``
+(common/hyperparams.py). Behaviour as in ML-Agents Release 22 (docs/ppo.md, "PPO details that affect results"):
 
 * Both ignore ``done``: their returns are always bootstrapped with V(next obs).
 * Curiosity: a state encoder phi (a network body with the signal's network_settings), an inverse
@@ -26,7 +26,6 @@ named alike). Behaviour as in ML-Agents Release 22 (docs/ppo.md, "PPO details th
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar, Sequence
@@ -36,7 +35,7 @@ import torch
 from torch import nn
 
 from trainer.common.adam import Adam
-from trainer.ppo.hyperparams import PPOHyperparams, SignalNetwork
+from trainer.common.hyperparams import SignalNetwork
 from trainer.common.layers import KAIMING_NORMAL, Swish, linear_layer
 from trainer.common.masked import masked_mean
 from trainer.common.networks import NetworkBody
@@ -48,12 +47,6 @@ CURIOSITY_HIDDEN = 256  # the inverse and forward models' hidden width (fixed in
 FORWARD_WEIGHT = 0.2  # loss = LOSS_MULTIPLIER * (0.2 forward + 0.8 inverse)
 LOSS_MULTIPLIER = 10.0
 EPSILON = 1e-10
-
-
-def _body_hyperparams(base: PPOHyperparams, network: SignalNetwork) -> PPOHyperparams:
-    return dataclasses.replace(base, hidden_units=network.hidden_units, num_layers=network.num_layers,
-                               normalize=network.normalize, vis_encode_type=network.vis_encode_type,
-                               memory_size=0)  # the reference ignores memory in these encoders
 
 
 def _tensor(array: Any, dtype: torch.dtype = torch.float32) -> torch.Tensor:
@@ -83,10 +76,10 @@ class Experience:
 
 
 class CuriosityNetwork(nn.Module):
-    def __init__(self, spec: BehaviorSpec, hyperparams: PPOHyperparams, network: SignalNetwork) -> None:
+    def __init__(self, spec: BehaviorSpec, network: SignalNetwork) -> None:
         super().__init__()
         self.action_spec: ActionSpec = spec.action_spec
-        self.state_encoder = NetworkBody(spec.observation_specs, _body_hyperparams(hyperparams, network))
+        self.state_encoder = NetworkBody(spec.observation_specs, network)
         hidden = self.state_encoder.output_size
         a = self.action_spec
         self.inverse_encoder = nn.Sequential(
@@ -168,10 +161,9 @@ class CuriosityProvider(RewardProvider):
     ignore_done = True  # returns bootstrap through the end of an episode
     needs_next_obs = True
 
-    def __init__(self, spec: BehaviorSpec, hyperparams: PPOHyperparams, strength: float,
-                 network: SignalNetwork) -> None:
+    def __init__(self, spec: BehaviorSpec, strength: float, network: SignalNetwork) -> None:
         self.strength = float(strength)
-        self.network = CuriosityNetwork(spec, hyperparams, network)
+        self.network = CuriosityNetwork(spec, network)
         self.optimizer = Adam([p for p in self.network.parameters() if p.requires_grad], lr=network.learning_rate)
         self.has_updated = False
 
@@ -213,12 +205,10 @@ class RNDProvider(RewardProvider):
     ignore_done = True
     needs_next_obs = False
 
-    def __init__(self, spec: BehaviorSpec, hyperparams: PPOHyperparams, strength: float,
-                 network: SignalNetwork) -> None:
+    def __init__(self, spec: BehaviorSpec, strength: float, network: SignalNetwork) -> None:
         self.strength = float(strength)
-        body = _body_hyperparams(hyperparams, network)
-        self.target = NetworkBody(spec.observation_specs, body)
-        self.predictor = NetworkBody(spec.observation_specs, body)
+        self.target = NetworkBody(spec.observation_specs, network)
+        self.predictor = NetworkBody(spec.observation_specs, network)
         for p in self.target.parameters():
             p.requires_grad_(False)
         self.optimizer = Adam([p for p in self.predictor.parameters() if p.requires_grad], lr=network.learning_rate)
@@ -274,13 +264,13 @@ class DiscriminatorNetwork(nn.Module):
     Linear(hidden, 128), a learned sigma) sits between the body and the estimator
     Sigmoid(Linear(., 1))."""
 
-    def __init__(self, spec: BehaviorSpec, hyperparams: PPOHyperparams, network: SignalNetwork) -> None:
+    def __init__(self, spec: BehaviorSpec, network: SignalNetwork) -> None:
         super().__init__()
         a = spec.action_spec
         self.action_spec = a
         self.use_actions, self.use_vail = network.use_actions, network.use_vail
         extra = a.continuous_size + sum(a.discrete_branches) + 1 if self.use_actions else 0
-        self.encoder = NetworkBody(spec.observation_specs, _body_hyperparams(hyperparams, network), extra)
+        self.encoder = NetworkBody(spec.observation_specs, network, extra)
         size = self.encoder.output_size
         if self.use_vail:
             self.z_sigma = nn.Parameter(torch.ones(GAIL_Z_SIZE))
@@ -336,10 +326,9 @@ class GAILProvider(RewardProvider):
     ignore_done = False
     needs_next_obs = False
 
-    def __init__(self, spec: BehaviorSpec, hyperparams: PPOHyperparams, strength: float,
-                 network: SignalNetwork) -> None:
+    def __init__(self, spec: BehaviorSpec, strength: float, network: SignalNetwork) -> None:
         self.strength = float(strength)
-        self.network = DiscriminatorNetwork(spec, hyperparams, network)
+        self.network = DiscriminatorNetwork(spec, network)
         self.needs_done = network.use_actions
         self.optimizer = Adam([p for p in self.network.parameters() if p.requires_grad], lr=network.learning_rate)
         self.generator = torch.Generator()
@@ -439,16 +428,17 @@ class GAILProvider(RewardProvider):
 PROVIDERS = {"curiosity": CuriosityProvider, "rnd": RNDProvider, "gail": GAILProvider}
 
 
-def make_providers(spec: BehaviorSpec, hyperparams: PPOHyperparams, seed: int) -> dict[str, RewardProvider]:
-    """One provider per intrinsic reward signal of ``hyperparams``, each initialised from its own
-    seed (``seed`` + its position), in the order of the YAML."""
+def make_providers(spec: BehaviorSpec, reward_signals: dict[str, tuple[float, float]],
+                   networks: dict[str, SignalNetwork], seed: int) -> dict[str, RewardProvider]:
+    """One provider per intrinsic signal of ``reward_signals`` (name -> (gamma, strength), an
+    algorithm view's), built from its entry of ``networks`` (the view's ``reward_signal_networks``)
+    and initialised from its own seed (``seed`` + its position), in the order of the YAML."""
     providers = {}
-    for index, (name, (_gamma, strength)) in enumerate(hyperparams.reward_signals.items()):
+    for index, (name, (_gamma, strength)) in enumerate(reward_signals.items()):
         if name in PROVIDERS:
             with torch.random.fork_rng(devices=[]):
                 torch.manual_seed(seed + index)
-                providers[name] = PROVIDERS[name](spec, hyperparams, strength,
-                                                  hyperparams.reward_signal_networks[name])
+                providers[name] = PROVIDERS[name](spec, strength, networks[name])
     return providers
 
 

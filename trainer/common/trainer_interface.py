@@ -15,6 +15,11 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, Any, ClassVar
 
+import torch
+
+from trainer.config.support import SUPPORTED_REWARD_SIGNALS
+from trainer.errors import ConfigError
+
 if TYPE_CHECKING:
     from protos.types import BehaviorSpec
     from trainer.behavioral_cloning import BehavioralCloning
@@ -24,7 +29,8 @@ if TYPE_CHECKING:
 
 
 class Trainer(ABC):
-    """One behavior's learner. Subclasses set the attributes below in their ``__init__``."""
+    """One behavior's learner. ``Trainer.__init__`` checks the reward signals and sets
+    ``brain_name``, ``behavior_spec``, ``hyperparams`` and ``device``; subclasses set the rest."""
 
     uses_groups: ClassVar[bool] = False  # True: the loop assembles trajectories with GroupTracker
 
@@ -34,6 +40,22 @@ class Trainer(ABC):
     step: int  # agent steps trained on (the max_steps, summary and checkpoint clock)
     providers: dict[str, RewardProvider]  # intrinsic reward signals by name (curiosity, rnd, gail)
     behavioral_cloning: BehavioralCloning | None  # behavioral_cloning: one round after each update
+    hyperparams: Any  # the algorithm's view of the behavior's settings (trainer/config/views.py)
+    device: torch.device
+
+    def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: Any, device: str = "cpu") -> None:
+        """What every trainer starts with: its reward signals checked (a ConfigError naming the
+        behavior), then ``brain_name``, ``behavior_spec``, ``hyperparams`` and ``device`` set."""
+        for name in hyperparams.reward_signals:
+            if name not in SUPPORTED_REWARD_SIGNALS:
+                raise ConfigError(f"reward_signals.{name} is not supported yet for behavior "
+                                  f"{brain_name!r}; use only {list(SUPPORTED_REWARD_SIGNALS)}")
+        if not hyperparams.reward_signals:
+            raise ConfigError(f"behavior {brain_name!r} has no reward_signals; add an extrinsic block")
+        self.brain_name = brain_name
+        self.behavior_spec = behavior_spec
+        self.hyperparams = hyperparams
+        self.device = torch.device(device)
 
     # ------------------------------------------------------------------ experience
     @abstractmethod

@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from protos.types import ActionSpec, ObservationSpec
-from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.common.hyperparams import NetworkHyperparams
 from trainer.common.layers import XAVIER_UNIFORM, hidden_layers, linear_layer
 from trainer.common.networks import LSTMMemory, ObservationEncoder, check_network_settings
 
@@ -51,7 +51,7 @@ class POCACritic(nn.Module):
     """value() and baseline() (module docstring); checkpoint key ``Optimizer:critic``."""
 
     def __init__(self, observation_specs: Sequence[ObservationSpec], action_spec: ActionSpec,
-                 reward_signal_names: Sequence[str], hyperparams: PPOHyperparams):
+                 reward_signal_names: Sequence[str], hyperparams: NetworkHyperparams):
         super().__init__()
         check_network_settings(hyperparams)
         h = hyperparams.hidden_units

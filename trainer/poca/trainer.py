@@ -191,14 +191,9 @@ class POCATrainer(PPOTrainer):
         fields["mates_continuous"] = pad_mates(group.continuous_actions.astype(np.float32), width)
         fields["mates_discrete"] = pad_mates(group.discrete_actions.astype(np.int64), width)
         fields["mates_present"] = pad_mates(group.present, width)
-        if self.hyperparams.memory_size:  # whole sequences, as PPO's: zeros after the last step, masks 0
-            fields["memory"] = np.asarray(traj.memories, np.float32)
-            fields["critic_memory"] = critic_memories
+        if self.hyperparams.memory_size:  # whole sequences, as PPO's; the baseline's memory padded alike
             fields["baseline_memory"] = baseline_memories
-            fields["masks"] = np.ones(len(traj), dtype=np.float32)
-            pad = -len(traj) % self.sequence_length
-            if pad:
-                fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
+            fields = self._in_whole_sequences(traj, fields, critic_memories)
         self.buffer.append(fields)
         self.step += len(traj)
         return stats

@@ -12,8 +12,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from trainer.config.support import SUPPORTED_REWARD_SIGNALS
-from trainer.errors import ConfigError
 from trainer.common import numpy_net
 from trainer.ppo import numpy_update
 from trainer.common.adam import Adam
@@ -26,6 +24,7 @@ from trainer.common.masked import masked_mean
 from trainer.ppo.losses import policy_loss, ppo_loss, value_loss
 from trainer.common.networks import Critic
 from trainer.common.policy import Policy
+from trainer.common.recurrent_critic import RecurrentCriticValues
 from trainer.common.reward_providers import Experience, load_providers, make_providers
 from trainer.common.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
 from trainer.common.numpy_policy import noise_state, set_noise_state
@@ -57,23 +56,12 @@ def normalize_advantages(advantages: np.ndarray, sum_across_ranks=None) -> np.nd
     return ((a - mean) / (std + ADVANTAGE_STD_EPSILON)).astype(np.float32)
 
 
-class PPOTrainer(Trainer):
+class PPOTrainer(RecurrentCriticValues, Trainer):
     """PPO for one brain: ``policy`` acts, the critic estimates values, one Adam updates both."""
 
     def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: PPOHyperparams,
                  seed: int, device: str = "cpu", use_numpy_update: bool = True):
-        for name in hyperparams.reward_signals:
-            if name not in SUPPORTED_REWARD_SIGNALS:
-                raise ConfigError(
-                    f"reward_signals.{name} is not supported yet for behavior {brain_name!r}; "
-                    f"use only {list(SUPPORTED_REWARD_SIGNALS)}"
-                )
-        if not hyperparams.reward_signals:
-            raise ConfigError(f"behavior {brain_name!r} has no reward_signals; add an extrinsic block")
-        self.brain_name = brain_name
-        self.behavior_spec = behavior_spec
-        self.hyperparams = hyperparams
-        self.device = torch.device(device)
+        super().__init__(brain_name, behavior_spec, hyperparams, device)
         self.policy = Policy(behavior_spec, hyperparams, seed, device)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed + 2)
@@ -83,7 +71,8 @@ class PPOTrainer(Trainer):
         ]
         self.optimizer = Adam(trainable, lr=hyperparams.learning_rate)  # adam.py says why not torch.optim
         # curiosity / rnd: their own networks and optimizers (reward_providers.py)
-        self.providers = make_providers(behavior_spec, hyperparams, seed + 4)
+        self.providers = make_providers(behavior_spec, hyperparams.reward_signals,
+                                        hyperparams.reward_signal_networks, seed + 4)
         self._needs_next_obs = any(p.needs_next_obs for p in self.providers.values())
         self._needs_done = any(p.needs_done for p in self.providers.values())  # gail with use_actions
         self._episode_intrinsic: dict[Any, dict[str, float]] = {}  # episode -> reward sums so far
@@ -134,39 +123,6 @@ class PPOTrainer(Trainer):
         next_values = {name: float(v[-1]) for name, v in estimates.items()}
         return values, next_values
 
-    def _value_estimates_by_sequence(self, traj: Trajectory):
-        """A recurrent critic run over the trajectory sequence by sequence (whole sequences of
-        ``sequence_length`` from the start, then the rest), its memory carried on from the agent's
-        previous trajectory. Returns (values [T] per signal, V(next) per signal, the critic memory
-        each step's sequence starts from [T, m])."""
-        length, step, size = len(traj), self.sequence_length, self.hyperparams.memory_size
-        memory = self._critic_memory.pop(traj.episode, None)
-        memory = np.zeros((1, size), np.float32) if memory is None else memory[None]
-        starts = np.zeros((length, size), dtype=np.float32)
-        parts: dict[str, list[np.ndarray]] = {}
-        for begin in range(0, length, step):  # the last sequence may be short
-            end = min(begin + step, length)
-            starts[begin:end] = memory[0]
-            values, memory = self._critic_with_memory([o[begin:end] for o in traj.obs], memory)
-            for name, v in values.items():
-                parts.setdefault(name, []).append(v)
-        next_values, _ = self._critic_with_memory([n[None] for n in traj.next_obs], memory)
-        next_values = {name: float(v[0]) for name, v in next_values.items()}
-        if not traj.done:
-            self._critic_memory[traj.episode] = memory[0]
-        return {name: np.concatenate(v) for name, v in parts.items()}, next_values, starts
-
-    def _critic_with_memory(self, obs: list[np.ndarray], memory: np.ndarray
-                            ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        """One sequence (all rows of ``obs``) through the recurrent critic from memory [1, m]:
-        (values [rows] per signal, the memory after it [1, m]); numpy when it can."""
-        if self._numpy_critic is not None:
-            return self._numpy_critic.with_memory(obs, memory, len(obs[0]))
-        with torch.inference_mode():
-            values, after = self.critic.forward_memory(
-                self._tensors(obs), torch.as_tensor(memory, device=self.device)[None], len(obs[0]))
-        return {name: v.cpu().numpy() for name, v in values.items()}, after[0].cpu().numpy()
-
     def process_trajectory(self, traj: Trajectory) -> dict[str, float]:
         """Normalise, estimate values, compute GAE per reward signal, and buffer the experiences."""
         length = len(traj)
@@ -201,12 +157,7 @@ class PPOTrainer(Trainer):
                                 else np.mean(np.stack(advantages), axis=0)).astype(np.float32)
         self._add_action_fields(traj, fields)
         if self.hyperparams.memory_size:
-            fields["memory"] = np.asarray(traj.memories, np.float32)
-            fields["critic_memory"] = critic_memories
-            fields["masks"] = np.ones(length, dtype=np.float32)
-            pad = -length % self.sequence_length  # whole sequences: zeros after the last step, masks 0
-            if pad:
-                fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
+            fields = self._in_whole_sequences(traj, fields, critic_memories)
         self.buffer.append(fields)
         self.step += length
         return stats

@@ -1,5 +1,5 @@
-"""SAC's pure pieces: entropy targets, the soft target update, the squashed Gaussian's
-log-probability and the four losses (ML-Agents' discrete/continuous SAC; docs/sac.md).
+"""SAC's pure pieces: entropy targets, the soft target update and the four losses (ML-Agents'
+discrete/continuous SAC; docs/sac.md). The squashed Gaussian itself: trainer/common/distributions.py.
 
 Shapes: n = batch, c = continuous dimensions, b = discrete branches, K = sum of branch sizes.
 Per reward signal, Q networks give [n] (continuous only) or [n, K] (one value per discrete option).
@@ -11,8 +11,6 @@ from typing import Sequence
 
 import torch
 from torch import nn
-
-from trainer.common.distributions import gaussian_log_prob
 
 CONTINUOUS_TARGET_ENTROPY_SCALE = 1.0  # target entropy -1 nat per continuous dimension
 DISCRETE_TARGET_ENTROPY_SCALE = 0.2  # 0.2 * log(k) per branch: about epsilon-greedy 0.05
@@ -33,16 +31,6 @@ def soft_update(source: nn.Module | Sequence[torch.Tensor], target: nn.Module | 
     targets = target.parameters() if isinstance(target, nn.Module) else target
     for src, dst in zip(sources, targets):
         dst.lerp_(src, tau)
-
-
-def tanh_log_abs_det_jacobian(raw: torch.Tensor) -> torch.Tensor:
-    """log |d tanh(x) / dx| = 2 (log 2 - x - softplus(-2x)), stable for large |x|. [n, c] -> [n, c]."""
-    return 2.0 * (math.log(2.0) - raw - nn.functional.softplus(-2.0 * raw))
-
-
-def squashed_log_prob(raw: torch.Tensor, mu: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:
-    """Per-dimension log-density of tanh(raw) with raw ~ N(mu, sigma). [n, c] -> [n, c]."""
-    return gaussian_log_prob(raw, mu, log_sigma) - tanh_log_abs_det_jacobian(raw)
 
 
 def q_backup(rewards: torch.Tensor, dones: torch.Tensor, next_values: torch.Tensor, gamma: float,

@@ -25,10 +25,12 @@ which ``SACTrainer.update`` copies into all of them first):
     policy   = mean [alpha_c sum log pi_c - Q1(x, a)] (+ the discrete terms), Q1 held constant
     entropy  = -mean log alpha (log pi + target)
 Gradients by hand: the Q and V losses reach their own networks, the policy loss reaches the policy
-through a (via Q1's input, d/du = dL/da (1 - a^2)), log pi_c and pi, the entropy loss the log
-alphas. Then three Adam steps (the trainer's optimisers) and the soft update of the target.
+through a (via Q1's input) and log pi_c (both back through the sample:
+numpy_distributions.squashed_sample_grads) and pi, the entropy loss the log alphas. Then three Adam steps (the trainer's optimisers) and the soft update of the target.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -38,7 +40,7 @@ from trainer.common import numpy_net
 from trainer.common.distributions import EPSILON
 from trainer.common.numpy_net import LOG_SIGMA_MAX, LOG_SIGMA_MIN
 from trainer.sac import losses
-from trainer.common.numpy_policy import squashed_entropy as _entropy, squashed_log_prob as _numpy_squashed_log_prob
+from trainer.sac.policy import policy_entropy
 
 
 def supports(trainer) -> bool:
@@ -49,6 +51,26 @@ def supports(trainer) -> bool:
                 trainer.q_network.q1_network, trainer.q_network.q2_network)
     optimizers = (trainer.policy_optimizer, trainer.value_optimizer, trainer.entropy_optimizer)
     return all(numpy_net.supports(m) for m in networks) and all(o.on_cpu for o in optimizers)
+
+
+@dataclass
+class _Sample:
+    """The policy's fresh sample in one gradient step: the continuous block's (None without it) and
+    the discrete branches' (None without them), with the entropy coefficients they are weighed by."""
+
+    mu: np.ndarray | None
+    ls_raw: np.ndarray | None = None  # log sigma before the clamp [n, c]
+    log_sigma: np.ndarray | None = None
+    noise: np.ndarray | None = None
+    raw: np.ndarray | None = None  # mu + noise sigma
+    action: np.ndarray | None = None  # tanh(raw)
+    sum_log_pi: np.ndarray | None = None  # [n]
+    alpha_c: np.ndarray | None = None  # [1]
+    probs: np.ndarray | None = None  # [n, K], every branch side by side
+    log_probs: np.ndarray | None = None  # log(probs + EPSILON)
+    alpha_d: np.ndarray | None = None  # [B]
+    alpha_rep: np.ndarray | None = None  # [K]: each branch's alpha over its options
+    neg_entropy: np.ndarray | None = None  # [n, B]
 
 
 def _head_outputs(h: np.ndarray, heads: dict) -> dict[str, np.ndarray]:
@@ -123,25 +145,9 @@ class NumpySAC:
         actor_cache: list = []
         h = body.forward(x, actor_cache)
         masks = batch["action_masks"] if branches else None
-        mu, logits = self.actor.heads_of(h, masks)
-        sum_log_pi = None
-        if c:
-            w_ls, b_ls = self.actor.log_sigma_head
-            ls_raw = h @ w_ls + b_ls
-            log_sigma = np.minimum(np.maximum(ls_raw, LOG_SIGMA_MIN), LOG_SIGMA_MAX)
-            noise = torch.randn(mu.shape, generator=trainer.noise_generator).numpy()
-            sigma = np.exp(log_sigma)
-            raw = mu + noise * sigma
-            action = np.tanh(raw)
-            sum_log_pi = _numpy_squashed_log_prob(raw, mu, log_sigma).sum(axis=1)
-            alpha_c = np.exp(self.log_alpha_c)  # [1]
-        if branches:
-            parts = [nd.softmax(branch) for branch in logits]
-            probs = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
-            log_probs = np.log(probs + EPSILON)
-            alpha_d = np.exp(self.log_alpha_d)  # [B]
-            alpha_rep = np.repeat(alpha_d, branches)  # [K]
-            neg_entropy = np.add.reduceat(probs * log_probs, self.starts, axis=1)  # [n, B]
+        sample = self._sample(h, masks)
+        action, sum_log_pi, alpha_c = sample.action, sample.sum_log_pi, sample.alpha_c
+        probs, alpha_d, neg_entropy = sample.probs, sample.alpha_d, sample.neg_entropy
 
         # ---- Q1, Q2 of the stored actions (rows :n) and of the sample (rows n:), V, target V
         if c:
@@ -162,23 +168,101 @@ class NumpySAC:
                                                                   self.target.heads).items()}
 
         # ---- losses and the gradients of their outputs
-        if branches:
-            chosen = self.starts + batch["discrete_actions"]  # [n, B] columns of the options taken
-            row_index = np.arange(n)[:, None]
         entropy_term = None
         if branches:
             entropy_term = np.add.reduce(alpha_d * neg_entropy, axis=1) / len(branches)
         if c:
             continuous_term = alpha_c * sum_log_pi
             entropy_term = continuous_term if entropy_term is None else entropy_term + continuous_term
+        q_losses, value_losses, g_q1, g_q2, g_v = self._value_losses(
+            batch, rewards, q1_out, q2_out, values, next_values, entropy_term, probs, policy_rows)
+        mean_q1 = sum(q1_out[name][policy_rows] for name in self.names) / N  # [n, K or 1]
+        stats = self._stats(sample, mean_q1, q_losses, value_losses)
+
+        # ---- the policy loss through Q1's continuous-action input (Q1's weights held constant)
+        if c:
+            g_mean_q1 = (-2.0 / n) * probs if branches else np.full((n, 1), -1.0 / n, dtype=np.float32)
+            for name in self.names:
+                g_q1[name][n:] = g_mean_q1 / N
+        # ---- value networks: heads, then bodies
+        grad_hv = self._heads_backward(self.critic, hv, g_v, grads)
+        self.critic.body.backward(grad_hv, v_cache, grads)
+        grad_hq1 = self._heads_backward(self.q1, hq1, g_q1, grads, param_rows=n)
+        grad_q_in = self.q1.body.backward(grad_hq1, q1_cache, grads, param_rows=n, input_grad=bool(c))
+        grad_hq2 = self._heads_backward(self.q2, hq2[:n], g_q2, grads)
+        self.q2.body.backward(grad_hq2, q2_cache, grads)
+
+        # ---- the policy
+        grad_h = self._policy_heads_backward(sample, h, grad_q_in[n:, -c:] if c else None, mean_q1, masks, grads)
+        body.backward(grad_h, actor_cache, grads)
+
+        # ---- the log alphas: -mean log alpha * gap
+        if c:
+            grads[self.alpha_ids[0]] = np.add.reduce(sum_log_pi + self.target_c, keepdims=True) / -n
+        if branches:
+            grads[self.alpha_ids[1]] = np.add.reduce(neg_entropy + self.target_d, axis=0) / (-n * len(branches))
+        return grads, stats
+
+    def _sample(self, h: np.ndarray, masks: np.ndarray | None) -> _Sample:
+        """The policy's fresh sample from the body's output h [n, hidden] (noise from the trainer's
+        generator) and what the losses read of it."""
+        mu, logits = self.actor.heads_of(h, masks)
+        sample = _Sample(mu=mu)
+        if self.continuous:
+            w_ls, b_ls = self.actor.log_sigma_head
+            sample.ls_raw = h @ w_ls + b_ls
+            sample.log_sigma = np.minimum(np.maximum(sample.ls_raw, LOG_SIGMA_MIN), LOG_SIGMA_MAX)
+            sample.noise = torch.randn(mu.shape, generator=self.trainer.noise_generator).numpy()
+            sample.raw, sample.action = nd.squashed_sample(mu, sample.log_sigma, sample.noise)
+            sample.sum_log_pi = nd.squashed_log_prob(sample.raw, mu, sample.log_sigma).sum(axis=1)
+            sample.alpha_c = np.exp(self.log_alpha_c)  # [1]
+        if self.branches:
+            parts = [nd.softmax(branch) for branch in logits]
+            sample.probs = probs = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
+            sample.log_probs = nd.categorical_option_log_probs(probs)
+            sample.alpha_d = np.exp(self.log_alpha_d)  # [B]
+            sample.alpha_rep = np.repeat(sample.alpha_d, self.branches)  # [K]
+            sample.neg_entropy = np.add.reduceat(probs * sample.log_probs, self.starts, axis=1)  # [n, B]
+        return sample
+
+    def _stats(self, sample: _Sample, mean_q1: np.ndarray, q_losses: tuple[list, list], value_losses: list
+               ) -> dict[str, float]:
+        """The losses' statistics; the policy loss's value is computed here only (its gradient is
+        taken by hand). ``mean_q1``: Q1 of the sample averaged over the signals [n, K or 1]."""
+        n, N, probs = len(mean_q1), len(self.names), sample.probs
+        per_row = np.zeros(n, dtype=np.float32)
+        if self.branches:
+            per_row = per_row + (sample.alpha_rep * probs * sample.log_probs - probs * mean_q1).sum(axis=1)
+            expected_q = (probs * mean_q1).sum(axis=1)
+        else:
+            expected_q = mean_q1[:, 0]
+        if self.continuous:
+            per_row = per_row + sample.alpha_c * sample.sum_log_pi - expected_q
+        return {
+            "Losses/Policy Loss": float(np.add.reduce(per_row)) / n,
+            "Losses/Value Loss": sum(value_losses) / N,
+            "Losses/Q1 Loss": sum(q_losses[0]) / N,
+            "Losses/Q2 Loss": sum(q_losses[1]) / N,
+            "Policy/Entropy": float(policy_entropy(n, sample.log_sigma, [] if probs is None else [probs]).mean()),
+        }
+
+    def _value_losses(self, batch, rewards, q1_out, q2_out, values, next_values, entropy_term,
+                      probs: np.ndarray | None, policy_rows: slice) -> tuple:
+        """Per reward signal: the Q1, Q2 and V losses and the gradients of the networks' outputs
+        (g_q1 for the stored rows only: the policy's rows are filled by the caller).
+        Returns (Q losses (Q1's, Q2's), V losses, g_q1, g_q2, g_v), per-signal lists and dicts."""
+        n, N, branches = len(batch["done"]), len(self.names), self.branches
+        if branches:
+            chosen = self.starts + batch["discrete_actions"]  # [n, B] columns of the options taken
+            row_index = np.arange(n)[:, None]
         q_losses, value_losses = ([], []), []
         g_q1 = {name: np.zeros_like(out) for name, out in q1_out.items()}
         g_q2 = {}
         g_v = {}
         done = batch["done"]
         for name in self.names:
-            gamma, _ = trainer.hyperparams.reward_signals[name]
-            provider = trainer.providers.get(name)
+            gamma, _ = self.trainer.hyperparams.reward_signals[name]
+            provider = self.trainer.providers.get(name)
             alive = 1.0 - done if provider is None or not provider.ignore_done else 1.0
             backup = rewards[name] + np.float32(gamma) * alive * next_values[name]
             g_q2[name] = np.zeros((n, q2_out[name].shape[1]), dtype=np.float32)
@@ -201,55 +285,29 @@ class NumpySAC:
             error = values[name] - (target - entropy_term)
             value_losses.append(0.5 * float(error @ error) / n)
             g_v[name] = (error / (n * N))[:, None]
-        mean_q1 = sum(q1_out[name][policy_rows] for name in self.names) / N  # [n, K or 1]
-        per_row = np.zeros(n, dtype=np.float32)
-        if branches:
-            per_row = per_row + (alpha_rep * probs * log_probs - probs * mean_q1).sum(axis=1)
-            expected_q = (probs * mean_q1).sum(axis=1)
-        else:
-            expected_q = mean_q1[:, 0]
-        if c:
-            per_row = per_row + alpha_c * sum_log_pi - expected_q
-        stats = {
-            "Losses/Policy Loss": float(np.add.reduce(per_row)) / n,
-            "Losses/Value Loss": sum(value_losses) / N,
-            "Losses/Q1 Loss": sum(q_losses[0]) / N,
-            "Losses/Q2 Loss": sum(q_losses[1]) / N,
-            "Policy/Entropy": float(_entropy(n, log_sigma if c else None, [probs] if branches else []).mean()),
-        }
+        return q_losses, value_losses, g_q1, g_q2, g_v
 
-        # ---- the policy loss through Q1's continuous-action input (Q1's weights held constant)
-        if c:
-            g_mean_q1 = (-2.0 / n) * probs if branches else np.full((n, 1), -1.0 / n, dtype=np.float32)
-            for name in self.names:
-                g_q1[name][n:] = g_mean_q1 / N
-        # ---- value networks: heads, then bodies
-        grad_hv = self._heads_backward(self.critic, hv, g_v, grads)
-        self.critic.body.backward(grad_hv, v_cache, grads)
-        grad_hq1 = self._heads_backward(self.q1, hq1, g_q1, grads, param_rows=n)
-        grad_q_in = self.q1.body.backward(grad_hq1, q1_cache, grads, param_rows=n, input_grad=bool(c))
-        grad_hq2 = self._heads_backward(self.q2, hq2[:n], g_q2, grads)
-        self.q2.body.backward(grad_hq2, q2_cache, grads)
-
-        # ---- the policy
+    def _policy_heads_backward(self, sample: _Sample, h: np.ndarray, grad_action: np.ndarray | None,
+                                  mean_q1: np.ndarray, masks: np.ndarray | None, grads: dict[int, np.ndarray]
+                                  ) -> np.ndarray:
+        """The policy loss back through the policy's heads: their gradients into ``grads``; returns
+        d loss / d h. ``grad_action``: d loss / d the sampled continuous actions (through Q1's input)."""
+        n, c = len(h), self.continuous
         grad_h = np.zeros_like(h)
         if c:
-            k = alpha_c / n  # d loss / d log pi_c
-            diff = raw - mu
-            denom = 2.0 * sigma ** 2 + EPSILON
-            gauss = 2.0 * diff / denom  # d log N / d mu = -d log N / d u
-            grad_raw = grad_q_in[n:, -c:] * (1.0 - action ** 2) + k * (2.0 * action - gauss)
-            grad_mu = grad_raw + k * gauss
-            grad_sigma = noise * grad_raw + k * (diff ** 2 * 4.0 * sigma / denom ** 2 - 1.0 / (sigma + EPSILON))
-            grad_ls = sigma * grad_sigma * ((ls_raw >= LOG_SIGMA_MIN) & (ls_raw <= LOG_SIGMA_MAX))
+            # d loss / d a: through Q1's input; d loss / d log pi_c: alpha_c / n
+            grad_mu, grad_ls = nd.squashed_sample_grads(sample.raw, sample.action, sample.mu, sample.log_sigma,
+                                                        sample.noise, grad_action, sample.alpha_c / n)
+            grad_ls = grad_ls * ((sample.ls_raw >= LOG_SIGMA_MIN) & (sample.ls_raw <= LOG_SIGMA_MAX))  # the clamp's
             for (weight_id, bias_id), (weight, _), g in ((self.mu_ids, self.actor.mu, grad_mu),
                                                          (self.log_sigma_ids, self.actor.log_sigma_head, grad_ls)):
                 grads[weight_id] = (h.T @ g).T
                 grads[bias_id] = np.add.reduce(g, axis=0)
                 grad_h += g @ weight.T
-        if branches:
+        if self.branches:
+            probs = sample.probs
             q_weight = 2.0 if c else 1.0  # the hybrid loss subtracts sum pi Q1 twice (losses.policy_loss)
-            grad_probs = (alpha_rep * (log_probs + probs / (probs + EPSILON)) - q_weight * mean_q1) / n
+            grad_probs = (sample.alpha_rep * (sample.log_probs + probs / (probs + EPSILON)) - q_weight * mean_q1) / n
             offsets = self.actor.offsets
             for index, (weight, _) in enumerate(self.actor.branches):
                 start, end = offsets[index], offsets[index + 1]
@@ -261,14 +319,7 @@ class NumpySAC:
                 grads[weight_id] = (h.T @ grad_logits).T
                 grads[bias_id] = np.add.reduce(grad_logits, axis=0)
                 grad_h += grad_logits @ weight.T
-        body.backward(grad_h, actor_cache, grads)
-
-        # ---- the log alphas: -mean log alpha * gap
-        if c:
-            grads[self.alpha_ids[0]] = np.add.reduce(sum_log_pi + self.target_c, keepdims=True) / -n
-        if branches:
-            grads[self.alpha_ids[1]] = np.add.reduce(neg_entropy + self.target_d, axis=0) / (-n * len(branches))
-        return grads, stats
+        return grad_h
 
     def _heads_backward(self, network: numpy_net.NumpyCritic, h: np.ndarray, g_out: dict[str, np.ndarray],
                         grads: dict[int, np.ndarray], param_rows: int | None = None) -> np.ndarray:

@@ -15,10 +15,10 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from trainer.common.distributions import EPSILON
-from trainer.common.numpy_policy import PolicyOutput, squashed_entropy as _entropy
+from trainer.common.distributions import categorical_option_log_probs, squashed_log_prob, squashed_sample
+from trainer.common.numpy_policy import PolicyOutput
+from trainer.common.numpy_policy import squashed_entropy as policy_entropy  # (numpy_step.py's name)
 from trainer.common.policy import Policy, allowed_from_mask
-from trainer.sac.losses import squashed_log_prob
 
 
 class SACPolicy(Policy):
@@ -55,7 +55,7 @@ class SACPolicy(Policy):
         """For the update, with gradients: (squashed actions [n, c] (reparameterised), their
         log-probs [n, c], the discrete probabilities [n, K] and log(p + eps) [n, K] of every
         option; None for an absent action kind), and without: the policy's entropy per row, float32
-        [n] (``_entropy``, for ``Policy/Entropy``). A recurrent actor reads the n rows as sequences
+        [n] (``policy_entropy``). A recurrent actor reads the n rows as sequences
         of ``sequence_length`` starting from ``memories`` [1, n / sequence_length, m]."""
         if memories is not None:
             encoding, _ = self.actor.network_body.forward_memory(obs, memories, sequence_length)
@@ -66,12 +66,11 @@ class SACPolicy(Policy):
         if mu is not None:
             log_sigma = self.actor.log_sigma_of(encoding, mu)
             noise = torch.randn(mu.shape, generator=generator, device=mu.device)
-            raw = mu + noise * torch.exp(log_sigma)
-            actions = torch.tanh(raw)
+            raw, actions = squashed_sample(mu, log_sigma, noise)
             log_probs = squashed_log_prob(raw, mu, log_sigma)
         if logits:
             probs = torch.cat([torch.softmax(branch, dim=1) for branch in logits], dim=1)
-            all_log_probs = torch.log(probs + EPSILON)
-        entropy = _entropy(len(encoding), None if log_sigma is None else log_sigma.detach().cpu().numpy(),
-                           [] if probs is None else [probs.detach().cpu().numpy()])  # all branches: their sum
+            all_log_probs = categorical_option_log_probs(probs)
+        entropy = policy_entropy(len(encoding), None if log_sigma is None else log_sigma.detach().cpu().numpy(),
+                                 [] if probs is None else [probs.detach().cpu().numpy()])  # all branches: their sum
         return actions, log_probs, probs, all_log_probs, entropy

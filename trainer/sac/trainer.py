@@ -1,7 +1,8 @@
 """SACTrainer: trajectories into a replay buffer, then soft actor-critic gradient steps.
 
-One trainer per brain, with the PPOTrainer's interface for the run loop (``process_trajectory``,
-``ready_to_update``, ``update``, ``state_dict``, ``export_onnx``). Networks (docs/sac.md):
+One trainer per brain, behind the run loop's ``Trainer`` (trainer/common/trainer_interface.py:
+``process_trajectory``, ``ready_to_update``, ``update``, ``state_dict``, ``export_onnx``); a recurrent
+critic's value estimates as PPO's (common/recurrent_critic.py). Networks (docs/sac.md):
 
 * the policy: networks.Actor, squashed (tanh; state-dependent sigma);
 * a value network V(s) and its target copy (soft-updated with ``tau`` after every step);
@@ -27,18 +28,16 @@ import torch
 from torch import nn
 
 from protos.types import BehaviorSpec
-from trainer.config.support import SUPPORTED_REWARD_SIGNALS
-from trainer.errors import ConfigError
 from trainer.common import numpy_net
 from trainer.common.adam import Adam
 from trainer.common.encoders import VectorInput
 from trainer.common.networks import Critic, NetworkBody
+from trainer.common.recurrent_critic import RecurrentCriticValues
 from trainer.common.reward_providers import Experience, load_providers, make_providers
 from trainer.common.schedules import LEARNING_RATE_FLOOR, decay
 from trainer.common.numpy_policy import noise_state, set_noise_state
 from trainer.common.trainer_interface import Trainer
 from trainer.common.trajectory import Trajectory
-from trainer.ppo.trainer import PPOTrainer
 from trainer.sac import losses, numpy_step
 from trainer.sac.hyperparams import SACHyperparams
 from trainer.sac.policy import SACPolicy
@@ -81,19 +80,10 @@ def _next_obs_key(index: int) -> str:
     return f"next_obs_{index}"
 
 
-class SACTrainer(Trainer):
+class SACTrainer(RecurrentCriticValues, Trainer):
     def __init__(self, brain_name: str, behavior_spec: BehaviorSpec, hyperparams: SACHyperparams,
                  seed: int, device: str = "cpu", use_numpy_update: bool = True):
-        for name in hyperparams.reward_signals:
-            if name not in SUPPORTED_REWARD_SIGNALS:
-                raise ConfigError(f"reward_signals.{name} is not supported yet for behavior "
-                                  f"{brain_name!r}; use only {list(SUPPORTED_REWARD_SIGNALS)}")
-        if not hyperparams.reward_signals:
-            raise ConfigError(f"behavior {brain_name!r} has no reward_signals; add an extrinsic block")
-        self.brain_name = brain_name
-        self.behavior_spec = behavior_spec
-        self.hyperparams = hyperparams
-        self.device = torch.device(device)
+        super().__init__(brain_name, behavior_spec, hyperparams, device)
         spec = behavior_spec.action_spec
         self.branches = list(spec.discrete_branches)
         self.policy = SACPolicy(behavior_spec, hyperparams, seed, device)
@@ -130,7 +120,8 @@ class SACTrainer(Trainer):
         self.noise_generator = torch.Generator(device=self.device)  # the update's policy samples
         self.noise_generator.manual_seed(seed + 4)
         # curiosity / rnd: their own networks and optimizers, seeded after the SAC networks
-        self.providers = make_providers(behavior_spec, hyperparams, seed + 5)
+        self.providers = make_providers(behavior_spec, hyperparams.reward_signals,
+                                        hyperparams.reward_signal_networks, seed + 5)
         self._episode_intrinsic: dict[Any, dict[str, float]] = {}  # episode -> reward sums so far
         self.step = 0
         self.update_steps = 1  # gradient steps taken + 1 (the reference's counter, kept on resume)
@@ -141,10 +132,6 @@ class SACTrainer(Trainer):
         # vector observations without memory on the CPU: gradient steps in numpy (numpy_step.py says
         # why); MLAGENTS_LIKE_NUMPY_UPDATE=0 (``use_numpy_update`` False) keeps autograd, as for PPO
         self._numpy_step = numpy_step.NumpySAC(self) if use_numpy_update and numpy_step.supports(self) else None
-
-    # the recurrent critic's value estimates run sequence by sequence as PPO's (one implementation)
-    _value_estimates_by_sequence = PPOTrainer._value_estimates_by_sequence
-    _critic_with_memory = PPOTrainer._critic_with_memory
 
     # ------------------------------------------------------------------ experience
     def _tensors(self, arrays) -> list[torch.Tensor]:
@@ -173,12 +160,7 @@ class SACTrainer(Trainer):
         copy_normalization(self.policy.actor.network_body, self.critic.network_body)
         if self.hyperparams.memory_size:
             values, _, critic_memories = self._value_estimates_by_sequence(traj)
-            fields["memory"] = np.asarray(traj.memories, np.float32)
-            fields["critic_memory"] = critic_memories
-            fields["masks"] = np.ones(length, dtype=np.float32)
-            pad = -length % self.sequence_length  # whole sequences: zeros after the last step, masks 0
-            if pad:
-                fields = {k: np.concatenate([v, np.zeros((pad, *v.shape[1:]), v.dtype)]) for k, v in fields.items()}
+            fields = self._in_whole_sequences(traj, fields, critic_memories)
         elif self._numpy_critic is not None:
             values = self._numpy_critic(obs)
         else:
