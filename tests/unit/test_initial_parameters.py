@@ -18,7 +18,7 @@ from trainer.config.settings import MemorySettings, NetworkSettings, PPOSettings
 from trainer.first_steps import StartingBehavior
 from trainer.ppo.hyperparams import PPOHyperparams
 from trainer.sac.hyperparams import SACHyperparams
-from trainer.sac.losses import squashed_log_prob
+from trainer.common.distributions import squashed_log_prob
 from trainer.sac.policy import SACPolicy
 
 
