@@ -1,8 +1,9 @@
 """Benchmarks of the stub task ``creature`` (docs/stub-tasks.md; run by hand, not a test).
 
     .venv/bin/python bench/creature.py steps [--areas 1 8] [--steps 200] [--repeats 5] [--kind quadruped]
+    .venv/bin/python bench/creature.py noise [--sigmas 0 0.1 0.3 1] [--areas 4] [--minutes 1]
     .venv/bin/python bench/creature.py evaluate POLICY [POLICY ...] [--kind quadruped --creature-seed 7]
-                     [--roughness 0] [--areas 8] [--minutes 2] [--seed 0]
+                     [--roughness 0] [--target-speed 1] [--areas 8] [--minutes 2] [--seed 0]
 
 ``steps``: per area count, three rows on the same MjModel (one creature per arena):
   * ``stub creature`` ``CreatureTask.step`` + ``reset`` of the finished agents, random actions in [-1, 1]
@@ -19,7 +20,11 @@
 distance covered by the centre of mass (path length, and progress towards the target) per minute
 of simulated time, falls per minute, mean reward per step (``unity_stub_env.tasks.creature.run_policy``). An ``.onnx`` policy acts with its mean
 action, or with ``--sample`` with its sampled actions (as while training; the ONNX graph draws the noise).
-Both print markdown tables and write JSON to bench/out/creature_<command>.json.
+``noise``: how lethal exploration is: zero-mean Gaussian joint targets of each std ``--sigmas``
+(clipped to [-1, 1], drawn anew at every decision, as a policy with mean 0 samples them), falls
+and distance per simulated minute (``run_policy``).
+
+All print markdown tables and write JSON to bench/out/creature_<command>.json.
 """
 from __future__ import annotations
 
@@ -42,11 +47,13 @@ from dodge_steps import best_of  # noqa: E402  (bench/ is the script's folder on
 OUT = Path(__file__).resolve().parent / "out"
 
 
-def _params(kind: str, creature_seed: int, roughness: float = 0.0) -> EnvironmentParameters:
+def _params(kind: str, creature_seed: int, roughness: float = 0.0, target_speed: float = 1.0
+            ) -> EnvironmentParameters:
     params = EnvironmentParameters()
     params.set("creature_kind", lambda: float(KINDS.index(kind)))
     params.set("creature_seed", lambda: float(creature_seed))
     params.set("terrain_roughness", lambda: roughness)
+    params.set("target_speed", lambda: target_speed)
     return params
 
 
@@ -115,25 +122,42 @@ def _sampling(path: str):
 
 
 def evaluate_command(args) -> dict:
-    task = make_task("creature", num_areas=args.areas, seed=args.seed,
-                     env_params=_params(args.kind, args.creature_seed, args.roughness))
+    params = lambda: _params(args.kind, args.creature_seed, args.roughness, args.target_speed)  # noqa: E731
+    task = make_task("creature", num_areas=args.areas, seed=args.seed, env_params=params())
     size, actions = task.observation_specs[0].shape[0], task.action_spec.continuous_size
     control_steps = int(round(args.minutes * 60.0 / task.control_dt))
     results = {}
     for policy in dict.fromkeys([*args.policies, "zero", "random"]):
-        task = make_task("creature", num_areas=args.areas, seed=args.seed,
-                         env_params=_params(args.kind, args.creature_seed, args.roughness))
+        task = make_task("creature", num_areas=args.areas, seed=args.seed, env_params=params())
         act = load_policy(policy, size, actions, args.seed)
         if args.sample and policy.endswith(".onnx"):
             act = _sampling(policy)
         results[policy] = run_policy(task, act, control_steps)
-    print(f"{args.kind} seed {args.creature_seed}, roughness {args.roughness}, {args.areas} arenas x "
+    print(f"{args.kind} seed {args.creature_seed}, roughness {args.roughness}, target speed {args.target_speed} m/s, "
+          f"{args.areas} arenas x "
           f"{args.minutes} simulated min, {'sampled' if args.sample else 'mean'} actions")
     print("| policy | targets / min | distance m / min | towards target m / min | falls / min | mean reward / step |")
     print("|---|---|---|---|---|---|")
     for policy, r in results.items():
         print(f"| {policy} | {r['targets_per_minute']:.2f} | {r['distance_per_minute']:.1f} | "
               f"{r['progress_per_minute']:.1f} | {r['falls_per_minute']:.1f} | {r['mean_reward']:.3f} |")
+    return {"results": results}
+
+
+def noise_command(args) -> dict:
+    results = {}
+    for sigma in args.sigmas:
+        task = make_task("creature", num_areas=args.areas, seed=args.seed,
+                         env_params=_params(args.kind, args.creature_seed, args.roughness))
+        rng, size = np.random.default_rng(args.seed), task.action_spec.continuous_size
+        act = lambda obs, sigma=sigma: np.clip(rng.normal(0.0, sigma, (len(obs), size)), -1.0, 1.0)  # noqa: E731
+        results[str(sigma)] = run_policy(task, act, int(round(args.minutes * 60.0 / task.control_dt)))
+    print(f"{args.kind} seed {args.creature_seed}, roughness {args.roughness}, {args.areas} arenas x {args.minutes} "
+          "simulated min, zero-mean Gaussian joint targets")
+    print("| std | falls / min | distance m / min |")
+    print("|---|---|---|")
+    for sigma, r in results.items():
+        print(f"| {sigma} | {r['falls_per_minute']:.1f} | {r['distance_per_minute']:.1f} |")
     return {"results": results}
 
 
@@ -150,13 +174,23 @@ def main() -> None:
     evaluate.add_argument("--areas", type=int, default=8)
     evaluate.add_argument("--minutes", type=float, default=2.0)
     evaluate.add_argument("--seed", type=int, default=0)
+    evaluate.add_argument("--target-speed", type=float, default=1.0,
+                          help="the environment parameter target_speed (m/s) the policies were trained with: "
+                               "it is in their observation and sets the reward")
     evaluate.add_argument("--sample", action="store_true",
                           help="act with the .onnx policies' sampled actions (as in training) instead of their mean")
-    for p in (steps, evaluate):
+    noise = sub.add_parser("noise")
+    noise.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 0.1, 0.3, 1.0])
+    for p in (noise,):
+        p.add_argument("--roughness", type=float, default=0.0)
+        p.add_argument("--areas", type=int, default=4)
+        p.add_argument("--minutes", type=float, default=1.0)
+        p.add_argument("--seed", type=int, default=0)
+    for p in (steps, evaluate, noise):
         p.add_argument("--kind", choices=KINDS, default="quadruped")
         p.add_argument("--creature-seed", type=int, default=7)
     args = parser.parse_args()
-    record = (steps_command if args.command == "steps" else evaluate_command)(args)
+    record = {"steps": steps_command, "evaluate": evaluate_command, "noise": noise_command}[args.command](args)
     OUT.mkdir(exist_ok=True)
     record.update({"mujoco": mujoco.__version__, "python": platform.python_version(), "args": vars(args),
                    "time": time.strftime("%Y-%m-%d %H:%M:%S")})

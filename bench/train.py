@@ -1,6 +1,6 @@
 """Training benchmark (run by hand, not a test): our trainer vs the real ``mlagents-learn`` 1.1.0.
 
-    .venv/bin/python bench/train.py [--task basic|ball3d|dodge] [--config YAML] [--max-steps N]
+    .venv/bin/python bench/train.py [--task basic|ball3d|dodge|creature] [--config YAML] [--max-steps N]
                                     [--num-areas N] [--seed S | --seeds S ...] [--pairs P] [--out bench/out]
 
 One run trains the same stub task with the same YAML twice, one process after the other:
@@ -302,7 +302,7 @@ def markdown(task: str, ours: dict, reference: dict, verdict: dict) -> str:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--task", choices=("basic", "ball3d", "dodge", "2x20k"), default="ball3d")
+    parser.add_argument("--task", choices=("basic", "ball3d", "dodge", "creature", "2x20k"), default="ball3d")
     parser.add_argument("--config", type=Path, default=None, help="default configs/<task>.yaml")
     parser.add_argument("--max-steps", type=int, default=None)
     parser.add_argument("--num-areas", type=int, default=None)

@@ -141,6 +141,10 @@ class RunState:
         settings = opts.behavior_settings(brain, agents)
         if opts.legacy_env_steps and agents is not None:
             log_agent_steps(brain, agents, opts.behavior_settings(brain), settings)
+            # configuration.yaml is a modern file: from now on it carries the agent-step counts
+            self.options = opts.with_agent_steps(brain, agents)
+            if self.ranks.is_main:
+                write_run_options(self.options, self.run_dir)
         if settings.threaded:
             logger.warning("%s: threaded: true is accepted but has no effect here; updates run between "
                            "environment steps, as with threaded: false (same results, no policy lag).",

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import textwrap
 
+import yaml
+
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from tests.integration.conftest import free_port_block, learn
@@ -72,3 +74,7 @@ def test_a_0x_file_counts_environment_steps_so_2000_steps_of_14_agents_are_28000
     assert "are 28000 and 7000 agent steps" in log
     modern = log.split("with these values:\n", 1)[1]
     assert "max_steps: 28000" in modern and "summary_freq: 7000" in modern
+    # the run's configuration.yaml is a modern file: it carries the agent-step counts the run used
+    written = yaml.safe_load((tmp_path / "results" / "t" / "configuration.yaml").read_text())
+    dodge = written["behaviors"]["Dodge"]
+    assert (dodge["max_steps"], dodge["summary_freq"]) == (28000, 7000)

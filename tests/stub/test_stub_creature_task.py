@@ -150,6 +150,22 @@ def test_obstacles_appear_and_vital_contact_ends_the_episode():
     assert {name for name, _, _ in result.stats} == {"Creature/Targets Reached", "Creature/Distance"}
 
 
+def test_fall_penalty_sets_the_reward_of_the_falling_step_only():
+    # two arenas: agent 0's torso is dropped onto the ground, agent 1 stands
+    rewards = {}
+    for penalty in (0.0, 1.5):
+        task = make_task("creature", num_areas=2, seed=0, env_params=_params(fall_penalty=penalty))
+        task.data.qpos[task.root_qpos[0, 2]] = 0.05
+        result = task.step(_zeros(task), np.zeros((2, 0)))
+        assert result.done.tolist() == [True, False]
+        rewards[penalty] = result.rewards.tolist()
+    assert rewards[1.5][0] == -1.5  # the falling step's reward is replaced by the penalty
+    assert rewards[0.0][0] >= 0.0  # the default: no penalty, the Walker product as it was
+    assert rewards[1.5][1] == rewards[0.0][1]  # a standing agent is not touched
+    with pytest.raises(ValueError, match="fall_penalty must be >= 0"):
+        make_task("creature", num_areas=1, seed=0, env_params=_params(fall_penalty=-1.0))
+
+
 def test_a_standing_creature_is_interrupted_at_max_step():
     task = make_task("creature", num_areas=1, seed=0)
     task.max_step = 30
@@ -182,9 +198,10 @@ def test_shipped_config_names_only_parameters_the_task_reads():
     from trainer.config.cli_args import parse_run_options
     from unity_stub_env.tasks.creature import DEFAULTS
 
-    options = parse_run_options([os.path.join(REPO, "configs", "creature.yaml"), "--env", "stub:creature"])
-    assert list(options.behaviors) == ["Creature"]
-    assert set(options.environment_parameters) <= set(DEFAULTS)
+    for name in ("creature.yaml", "creature_walk.yaml"):
+        options = parse_run_options([os.path.join(REPO, "configs", name), "--env", "stub:creature"])
+        assert list(options.behaviors) == ["Creature"]
+        assert set(options.environment_parameters) <= set(DEFAULTS)
 
 
 def test_run_policy_counts_per_simulated_minute():

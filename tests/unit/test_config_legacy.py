@@ -6,7 +6,7 @@ import textwrap
 import pytest
 import yaml
 
-from trainer.config import load_run_options
+from trainer.config import load_run_options, write_run_options
 from trainer.errors import ConfigError
 
 SEED_000 = """
@@ -151,3 +151,23 @@ def test_0x_step_counts_become_agent_steps_at_first_contact_and_1x_ones_stay(tmp
     assert not options.legacy_env_steps
     settings = options.behavior_settings("Dodge", agents=14)
     assert (settings.max_steps, settings.summary_freq) == (2000, 500)
+
+
+def test_a_0x_behavior_converted_at_first_contact_is_written_with_agent_steps_once(tmp_path):
+    options = load_text(tmp_path, SEED_000)
+    converted = options.with_agent_steps("Dodge", 14)
+    dodge = converted.as_dict()["behaviors"]["Dodge"]
+    assert (dodge["max_steps"], dodge["summary_freq"]) == (70000000, 14000)  # 5e6 and 1000 x 14
+    assert options.as_dict()["behaviors"]["Dodge"]["max_steps"] == 5000000  # the loaded options are kept
+    # a converted behavior is not multiplied again, by a later contact or by behavior_settings
+    assert converted.with_agent_steps("Dodge", 14) is converted
+    assert converted.behavior_settings("Dodge", agents=14).max_steps == 70000000
+    # written and read back, configuration.yaml is a modern file with the same counts
+    path = write_run_options(converted, str(tmp_path / "out"))
+    again = load_run_options(path)
+    assert not again.legacy_env_steps
+    assert (again.behaviors["Dodge"].max_steps, again.behaviors["Dodge"].summary_freq) == (70000000, 14000)
+    modern = tmp_path / "modern.yaml"
+    modern.write_text("behaviors:\n  Dodge:\n    trainer_type: ppo\n    max_steps: 2000\n")
+    plain = load_run_options(str(modern))
+    assert plain.with_agent_steps("Dodge", 14) is plain  # a 1.x file is unaffected

@@ -273,6 +273,9 @@ class RunOptions:
     #: the file was an ML-Agents 0.x one: its max_steps and summary_freq count environment steps of
     #: one simulator, and become agent steps once the behavior's agents are counted (docs/configuration.md)
     legacy_env_steps: bool = False
+    #: the behaviors of such a file whose counts are already agent steps in ``behaviors``
+    #: (``with_agent_steps``, at their first contact), so configuration.yaml carries the counts the run uses
+    agent_step_behaviors: frozenset[str] = frozenset()
     #: --batch-per-rank: with K data-parallel ranks, buffer_size and batch_size count ONE rank's
     #: experiences (K times the YAML's per update) instead of all ranks' (docs/cluster.md)
     batch_per_rank: bool = False
@@ -299,7 +302,7 @@ class RunOptions:
             if self.cli_deterministic:
                 network = dataclasses.replace(settings.network_settings, deterministic=True)
                 settings = dataclasses.replace(settings, network_settings=network)
-        if self.legacy_env_steps and agents is not None:
+        if self.legacy_env_steps and agents is not None and brain_name not in self.agent_step_behaviors:
             settings = dataclasses.replace(settings, max_steps=settings.max_steps * agents,
                                            summary_freq=settings.summary_freq * agents)
         if self.max_steps_override is not None:
@@ -316,6 +319,21 @@ class RunOptions:
                 init_path = settings.init_path
             settings = dataclasses.replace(settings, init_path=init_path)
         return settings
+
+    def with_agent_steps(self, brain_name: str, agents: int) -> RunOptions:
+        """A 0.x file's options with ``brain_name``'s max_steps and summary_freq as agent steps
+        (× ``agents``, its agents in one simulator) in ``behaviors``; unchanged for a modern file or
+        a behavior already converted. configuration.yaml, a modern file, then shows the counts the
+        run uses (docs/configuration.md, "Steps in a 0.x file are environment steps")."""
+        if not self.legacy_env_steps or brain_name in self.agent_step_behaviors:
+            return self
+        settings = self.behaviors.get(brain_name, self.default_settings)
+        if settings is None:
+            return self
+        converted = dataclasses.replace(settings, max_steps=settings.max_steps * agents,
+                                        summary_freq=settings.summary_freq * agents)
+        return dataclasses.replace(self, behaviors={**self.behaviors, brain_name: converted},
+                                   agent_step_behaviors=self.agent_step_behaviors | {brain_name})
 
     def as_dict(self) -> dict[str, Any]:
         """Plain dict in the YAML layout and the reference's key order, for configuration.yaml."""

@@ -13,6 +13,8 @@ Environment parameters (Unity's EnvironmentParameters; read where said):
   terrain_roughness   0 (flat, default) .. 1: noise height 0 .. 0.6 m  at each episode start
   obstacles           number of boxes in the arena, 0 (default) .. 6    at each episode start
   target_speed        the speed to match, m/s (default 1.0)             at each episode start
+  fall_penalty        the reward of a step that ends in a fall is        at each episode start
+                      -fall_penalty when > 0 (default 0: no penalty)
 All arenas of a run share one creature morphology: the agents of one behavior must share one
 observation and action spec, and the spec depends on the bone and hinge counts. The morphology is
 fixed when the task is built (the trainer's first message carries the side channel before the
@@ -50,8 +52,12 @@ Reward per control step (Walker's product of two terms, both in [0, 1]):
                 creature's facing in its rest pose; generated creatures have no separate face frame)
   reward      = match_speed * look
 Reaching the target (the CoM within 1 m of it horizontally) moves the target (no reward of its own,
-as in Walker). The episode ends, without penalty, when a torso, hip, shoulder, neck or head bone
-touches the ground, walls or an obstacle (Walker ends on its body parts' ground contact), and is
+as in Walker). The episode ends when a torso, hip, shoulder, neck or head bone touches the ground,
+walls or an obstacle (Walker ends on its body parts' ground contact): without penalty by default,
+as Walker; with fall_penalty > 0 that step's reward is -fall_penalty instead (Walker's
+ground-contact component has this as its option "penalize ground contact", which sets the step's
+reward to a penalty such as -1; docs/stub-tasks.md, "creature: a recipe that walks with its mean
+actions", says why a run may want it). The episode is
 interrupted after max_step = 1000 control steps (50 s). A non-finite state (never seen) ends the
 episode too. Stats at an episode's end: Creature/Targets Reached, Creature/Distance (the CoM's
 horizontal path length, m).
@@ -95,7 +101,7 @@ SUBSTEPS = 10
 MAX_STEP = 1000
 VITAL = ("torso", "hip", "shoulder", "neck", "head")
 DEFAULTS = {"creature_kind": 0.0, "creature_seed": 0.0, "terrain_roughness": 0.0, "obstacles": 0.0,
-            "target_speed": 1.0}
+            "target_speed": 1.0, "fall_penalty": 0.0}
 PARK = np.array([0.0, 0.0, -10.0])  # where unused obstacles wait (below every heightfield)
 
 
@@ -170,7 +176,7 @@ class CreatureTask(Task):
     description = ("Generated creature walking to targets over generated terrain (docs/stub-tasks.md). Shapes shown for "
                    "the default quadruped (creature_kind 0, creature_seed 0); they follow the creature. "
                    "Reward: Walker's match-speed x look-at-target. Env params: creature_kind, creature_seed, "
-                   "terrain_roughness, obstacles, target_speed.")
+                   "terrain_roughness, obstacles, target_speed, fall_penalty.")
 
     def __init__(self, num_areas: int, seed: int, env_params: EnvironmentParameters | None = None):
         super().__init__(num_areas, seed, env_params)
@@ -215,6 +221,7 @@ class CreatureTask(Task):
         # per-agent state
         self.target = np.zeros((n, 3))
         self.target_speed = np.full(n, DEFAULTS["target_speed"])
+        self.fall_penalty = np.full(n, DEFAULTS["fall_penalty"])
         self.roughness = np.zeros(n)
         self.episode_step = np.zeros(n, dtype=np.int64)
         self.targets_reached = np.zeros(n, dtype=np.int64)
@@ -282,6 +289,11 @@ class CreatureTask(Task):
         if not (speed > 0).all():
             raise ValueError(f"environment parameter target_speed must be > 0, got {speed.min():g}")
         self.target_speed[agents] = speed
+        penalty = self.env_params.get_many("fall_penalty", DEFAULTS["fall_penalty"], len(agents))
+        if not (penalty >= 0).all():
+            raise ValueError(f"environment parameter fall_penalty must be >= 0 (the penalty is subtracted), "
+                             f"got {penalty.min():g}")
+        self.fall_penalty[agents] = penalty
         self.roughness[agents] = roughness
         data = self.data
         for i, r, k in zip(agents, roughness, obstacles):
@@ -381,6 +393,8 @@ class CreatureTask(Task):
             self.place_targets(agents, com[agents, :2])
         broken = ~np.isfinite(data.qpos[self.root_qpos]).all(axis=1) | ~np.isfinite(self.velocity).all(axis=(1, 2))
         fallen = (contact & self.vital).any(axis=1) | broken
+        penalized = fallen & (self.fall_penalty > 0)
+        rewards[penalized] = -self.fall_penalty[penalized]
         self.episode_step += 1
         interrupted = ~fallen & (self.episode_step >= self.max_step)
         done = fallen | interrupted
