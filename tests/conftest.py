@@ -18,6 +18,14 @@ import os
 
 import pytest
 
+# Two workers each run a trainer and its simulators on the same two CPUs. A run polls for its peer
+# only when each of its processes has a CPU of its own (trainer/envs/cpus.py), which each run
+# believes but the workers together do not have; polling would take the CPU the other worker's
+# processes wait for. So, in workers, runs sleep while they wait (MLAGENTS_LIKE_SPIN_WAIT_MS=0,
+# docs/configuration.md), unless the caller set it. Waiting changes no number a test checks.
+if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+    os.environ.setdefault("MLAGENTS_LIKE_SPIN_WAIT_MS", "0")
+
 # node id prefix -> group. Kept here rather than as xdist_group marks: pytest 9.2's structured
 # node ids silently drop the marks' grouping in pytest-xdist 3.8 (pytest-xdist issue 1386).
 XDIST_GROUPS = {
