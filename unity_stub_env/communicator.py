@@ -228,7 +228,7 @@ class RpcCommunicator:
             raise SessionEnd(f"The trainer at {self.address} answered with a message that is not a "
                              "UnityMessageProto; is it an ML-Agents trainer?", 1) from None
         if answer.header.status != STATUS_OK:
-            self._close_channel()
+            self._close_channel(abort=True)
             raise SessionEnd(f"The trainer closed the session (status {answer.header.status}).", 0)
         if self.stop_requested:
             self.close(send_closing=True)
@@ -246,13 +246,18 @@ class RpcCommunicator:
                 pass
         self._close_channel()
 
-    def _close_channel(self) -> None:
+    def _close_channel(self, abort: bool = False) -> None:
+        """``abort``: the trainer ended the session; the http2 transport then leaves no TIME_WAIT
+        on the trainer's port (http2_client.py, ``close``)."""
         if self._channel is not None:
             pace = getattr(self._channel, "pace", None)
             if pace is not None and pace.spin_s > 0:
                 logger.info("--spin-wait-ms %g: %d of %d answers were found by polling, not by a wake-up",
                             pace.spin_s * 1e3, pace.caught_polling, pace.arrivals)
-            self._channel.close()
+            if abort and isinstance(self._channel, Http2Channel):
+                self._channel.close(abort=True)
+            else:
+                self._channel.close()
             self._channel = None
 
 

@@ -225,12 +225,21 @@ class Http2Channel:
     def _send(self, data: bytes) -> None:
         self.sock.sendall(data)
 
-    def close(self) -> None:
+    def close(self, abort: bool = False) -> None:
+        """GOAWAY, then close. ``abort`` (the trainer has ended the session: nothing more to say)
+        closes with a reset instead of a FIN, so no TIME_WAIT is left on the trainer's port:
+        mlagents_envs binds its port again without SO_REUSEADDR when a script opens its next
+        UnityEnvironment, and a TIME_WAIT there fails that bind."""
         if self.sock is not None:
             try:
                 self.sock.sendall(frame(GOAWAY, 0, 0, struct.pack(">II", 0, NO_ERROR)))
             except OSError:
                 pass
+            if abort:
+                try:
+                    self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                except OSError:
+                    pass
             try:
                 self.sock.close()
             except OSError:
