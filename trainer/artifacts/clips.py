@@ -33,11 +33,13 @@ import time
 from pathlib import Path
 from typing import Callable, Sequence
 
+from trainer.envs.cpus import usable_cpus
+
 logger = logging.getLogger("mlagents_like")  # the run's console and log
 SECONDS = 10.0
 FPS = 20.0
 SIZE = (320, 240)
-CPU_SHARE = 0.04  # of the machine's CPU time while training: the issue's limit is a 5 % slowdown
+CPU_SHARE = 0.04  # of the machine's CPU time while training, under docs/video.md's 5 % slowdown
 # before the first clip's cost is known: the renderer's start-up and a first clip of the dearest
 # task, mimic (~5 CPU-s; ball3d and creature ~3; measured with the clip server's answers)
 FIRST_ESTIMATE = 5.0
@@ -47,13 +49,6 @@ RENDERER = [sys.executable, "-m", "unity_stub_env.render.clip_server"]
 def within_budget(spent: float, estimate: float, elapsed: float, cpus: int, share: float = CPU_SHARE) -> bool:
     """Whether a clip expected to cost ``estimate`` CPU seconds may start now (the module's rule)."""
     return spent + estimate <= share * cpus * elapsed
-
-
-def available_cpus() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
 
 
 def lowest_priority() -> None:
@@ -74,7 +69,7 @@ class ClipRecorder:
                  first_estimate: float = FIRST_ESTIMATE) -> None:
         self.task, self.seed, self.log_path = task, seed, log_path
         self.side_channel, self.stub_args = side_channel, list(stub_args)
-        self.clock, self.cpus, self.renderer = clock, cpus or available_cpus(), list(renderer)
+        self.clock, self.cpus, self.renderer = clock, cpus or usable_cpus(), list(renderer)
         self.started = clock()
         self.spent, self.estimate = 0.0, first_estimate
         self.process: subprocess.Popen | None = None
