@@ -61,10 +61,11 @@ def film_request(request: dict) -> str:
     agents_per_area, decision_period = stub_options(request["task"], list(request.get("stub_args") or []))
     tensorboard = request.get("tensorboard")
     side_channel = bytes.fromhex(request.get("side_channel") or "")
-    result = play(request["task"], request["policy"], request["video"], float(request["seconds"]), None,
-                  int(request["width"]), int(request["height"]), float(request["fps"]), int(request["seed"]),
-                  None, 0, False, None if tensorboard is None else tuple(tensorboard), int(request["samples"]),
-                  side_channel, agents_per_area, decision_period)
+    result = play(request["task"], request["policy"], request["video"], seconds=float(request["seconds"]),
+                  width=int(request["width"]), height=int(request["height"]), fps=float(request["fps"]),
+                  seed=int(request["seed"]), tensorboard=None if tensorboard is None else tuple(tensorboard),
+                  samples=int(request["samples"]), side_channel=side_channel, agents_per_area=agents_per_area,
+                  decision_period=decision_period)
     returns = ", ".join(f"{r:+.2f}" for r in result.episode_returns) or "none finished"
     return (f"Wrote {request['video']}: {result.frames} frames, {result.steps} control steps; episode returns: "
             f"{returns}; environment parameters: {describe_parameters(side_channel)}")
