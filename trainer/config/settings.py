@@ -247,6 +247,13 @@ class TorchSettings:
     device: str | None = None
 
 
+def _as_agent_steps(settings: TrainerSettings, agents: int) -> TrainerSettings:
+    """A 0.x behavior's max_steps and summary_freq (environment steps of one simulator) as agent
+    steps: × its ``agents`` in one simulator (docs/configuration.md)."""
+    return dataclasses.replace(settings, max_steps=settings.max_steps * agents,
+                               summary_freq=settings.summary_freq * agents)
+
+
 @dataclass(frozen=True)
 class RunOptions:
     """Everything one run needs. ``behaviors`` already has default_settings merged in."""
@@ -303,8 +310,7 @@ class RunOptions:
                 network = dataclasses.replace(settings.network_settings, deterministic=True)
                 settings = dataclasses.replace(settings, network_settings=network)
         if self.legacy_env_steps and agents is not None and brain_name not in self.agent_step_behaviors:
-            settings = dataclasses.replace(settings, max_steps=settings.max_steps * agents,
-                                           summary_freq=settings.summary_freq * agents)
+            settings = _as_agent_steps(settings, agents)
         if self.max_steps_override is not None:
             settings = dataclasses.replace(settings, max_steps=self.max_steps_override,
                                            summary_freq=min(settings.summary_freq,
@@ -330,9 +336,7 @@ class RunOptions:
         settings = self.behaviors.get(brain_name, self.default_settings)
         if settings is None:
             return self
-        converted = dataclasses.replace(settings, max_steps=settings.max_steps * agents,
-                                        summary_freq=settings.summary_freq * agents)
-        return dataclasses.replace(self, behaviors={**self.behaviors, brain_name: converted},
+        return dataclasses.replace(self, behaviors={**self.behaviors, brain_name: _as_agent_steps(settings, agents)},
                                    agent_step_behaviors=self.agent_step_behaviors | {brain_name})
 
     def as_dict(self) -> dict[str, Any]:
