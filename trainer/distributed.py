@@ -295,7 +295,7 @@ class Ranks:
     def _reseed(self, runner) -> None:
         if self.rank:
             sampling, shuffling = self.brains[runner.brain].seeds
-            runner.trainer.policy.generator.manual_seed(sampling)
+            runner.trainer.policy.reseed_noise(sampling)
             runner.trainer.shuffle_generator.manual_seed(shuffling)
 
     # ------------------------------------------------------------------ once per exchange

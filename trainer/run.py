@@ -45,6 +45,7 @@ from trainer.curriculum import EnvironmentParameterManager
 from trainer import warmup
 from trainer.distributed import RankLost, Ranks
 from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool
+from trainer.first_steps import StartingBehavior
 from trainer.errors import ResultsWriteError, UnityCommunicatorStoppedError
 from trainer.protocol.codec import NON_FINITE_STAT
 from trainer.results_dir import prepare_run_dir, run_dir_of
@@ -107,20 +108,34 @@ class RunState:
     clips: ClipRecorder | None = None  # --record-video (trainer/artifacts/clips.py)
     start_time: float = field(default_factory=time.time)
     _last_progress: float = float("-inf")
+    # behaviors deciding before torch is loaded (trainer/first_steps.py), and whether that may be
+    # tried: one rank on the CPU starting afresh (``run_training``)
+    starting: dict[str, StartingBehavior] = field(default_factory=dict)
+    first_steps: bool = False
+    torch_loaded: bool = False
     stepped: bool = False  # the first actions were sent (a start-up mark: bench/startup.py)
     updated: bool = False  # the first update was made (likewise)
 
     # ------------------------------------------------------------------ behaviors
-    def ensure_runner(self, behavior_name: str, agents: int | None = None) -> BehaviorRunner:
+    def load_torch(self) -> None:
+        """Wait for the background import of torch and the trainer's modules (trainer/warmup.py)."""
+        if self.torch_loaded:
+            return
+        configure_torch_threads(self.env_vars.torch_threads)
+        check_torch_device(self.options.torch_settings.device)
+        import trainer.behavior  # noqa: F401
+        self.torch_loaded = True
+        logger.debug("Start-up: torch and the trainer's modules imported.")
+
+    def ensure_runner(self, behavior_name: str, agents: int | None = None) -> BehaviorRunner | StartingBehavior:
         """The behavior's runner, created at its first contact; ``agents`` (its agents in one
-        simulator, then) converts a 0.x file's step counts (RunOptions.behavior_settings)."""
+        simulator, then) converts a 0.x file's step counts (RunOptions.behavior_settings). Before
+        torch is loaded, a StartingBehavior decides instead, where it can (trainer/first_steps.py)."""
         brain, _team = brain_name_of(behavior_name)
-        runner = self.runners.get(brain)
+        runner = self.runners.get(brain) or self.starting.get(brain)
         if runner is not None:
             return runner
         spec = self.pool.behavior_specs()[behavior_name]  # merged over the workers: only for a new brain
-        from trainer.behavior import BehaviorRunner
-
         opts = self.options
         logger.info("Connected new brain: %s", behavior_name)
         settings = opts.behavior_settings(brain, agents)
@@ -137,8 +152,36 @@ class RunState:
         note = goal_conditioning_note(spec.observation_specs, settings)
         if note:
             logger.warning("%s: %s", brain, note)
+        seed = opts.env_settings.seed + len(self.runners) + len(self.starting)
+        if self.first_steps and not self.torch_loaded:
+            starting = StartingBehavior.create(behavior_name, agents, brain, spec, settings, seed)
+            if starting is not None:
+                self.starting[brain] = starting
+                return starting
+        return self._create_runner(brain, spec, settings, seed)
+
+    def promote(self, trajectories: list, wait: bool) -> None:
+        """The behaviors that decided without torch get their real runners (``wait``: waiting
+        for torch; else only if it is loaded already), their policies continuing from the
+        first-steps policies; ``trajectories`` then point at the real runners. Called before any
+        trajectory is processed, so nothing learned differs (trainer/first_steps.py)."""
+        if not self.starting or not (wait or self.torch_loaded or warmup.finished()):
+            return
+        self.load_torch()
+        for brain, first in list(self.starting.items()):
+            runner = self._create_runner(brain, first.spec, first.settings, first.seed)
+            runner.trainer.policy.take_over(first.policy)
+            runner.add_episodes(first.episode_returns)
+            del self.starting[brain]
+            logger.debug("Start-up: %s: the trainer takes over from the first-steps policy.", brain)
+        trajectories[:] = [(self.runners[runner.brain], traj) for runner, traj in trajectories]
+
+    def _create_runner(self, brain: str, spec, settings, seed: int) -> BehaviorRunner:
+        from trainer.behavior import BehaviorRunner
+
+        self.load_torch()
+        opts = self.options
         ck = opts.checkpoint_settings
-        seed = opts.env_settings.seed + len(self.runners)
         # with data-parallel ranks, this rank's share of buffer_size and batch_size (trainer/distributed.py)
         runner = BehaviorRunner.create(brain, spec, self.ranks.settings_for(settings, brain), self.run_dir, seed,
                                        opts.torch_settings.device or "cpu", training=not ck.inference,
@@ -244,21 +287,22 @@ class RunState:
                 slots = tracker.on_step(terminal, decision, emit)
                 if learns:
                     runner.add_episodes(tracker.episodes.rewards)
-                self._episode_stats(runner.brain, tracker)
+                self._episode_stats(runner, tracker)
                 if len(decision):
                     tracker.on_actions(slots, out.continuous_raw[rows], out.discrete[rows],
                                        out.log_probs[rows], None if masks is None else masks[rows],
                                        None if memories is None else memories[rows],
                                        None if memories is None else out.memories[rows])
 
-    def _episode_stats(self, brain: str, tracker: AgentTracker) -> None:
+    def _episode_stats(self, runner: BehaviorRunner | StartingBehavior, tracker: AgentTracker) -> None:
+        brain = runner.brain
         eps = tracker.drain_episodes()
         if eps.rewards:
             rewards = np.asarray(eps.rewards, dtype=np.float64)
             self.reporter.add_many(brain, "Environment/Cumulative Reward", rewards, StatsAggregationMethod.AVERAGE)
             self.reporter.add_many(brain, "Environment/Episode Length", np.asarray(eps.lengths, np.float64),
                                    StatsAggregationMethod.AVERAGE)
-            extrinsic = self.runners[brain].settings.reward_signals.get("extrinsic")
+            extrinsic = runner.settings.reward_signals.get("extrinsic")
             if extrinsic is not None:  # as ML-Agents: what the extrinsic signal paid, group rewards included
                 paid = extrinsic.strength * (rewards + np.asarray(eps.group_rewards, dtype=np.float64))
                 self.reporter.add_many(brain, "Policy/Extrinsic Reward", paid, StatsAggregationMethod.AVERAGE)
@@ -393,7 +437,7 @@ class RunState:
 
     @property
     def finished(self) -> bool:
-        if self.options.checkpoint_settings.inference or not self.runners:
+        if self.options.checkpoint_settings.inference or not self.runners or self.starting:
             return False
         return all(r.done for r in self.runners.values())
 
@@ -465,11 +509,13 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         pool.connect()
         with timers.scope("env.reset"):
             results = pool.reset(state.initial_side_channel())
-        configure_torch_threads(env_vars.torch_threads)  # waits for the background import of torch
-        check_torch_device(options.torch_settings.device)
+        # one rank on the CPU starting afresh decides its first actions before torch is loaded
+        # (trainer/first_steps.py); otherwise the run waits for torch here
+        state.first_steps = (env_vars.ranks.world_size == 1 and options.torch_settings.device in (None, "cpu")
+                             and not ck.resume and not ck.inference)
+        if not state.first_steps:
+            state.load_torch()
         state.ranks = Ranks.start(env_vars, options.torch_settings.device, options.batch_per_rank)
-        import trainer.behavior  # noqa: F401
-        logger.debug("Start-up: torch and the trainer's modules imported.")
         while True:
             STOP.check()  # stop signals take effect here, between steps (trainer.stop)
             state.recorder.observe(results)
@@ -488,6 +534,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
             # the simulators step now; meanwhile: experience, PPO, summaries
             with timers.scope("record"):
                 state.record(decided, trajectories)
+            state.promote(trajectories, wait=bool(trajectories))
             state.learn(trajectories)
             state.report_progress()
             with timers.scope("env.wait"):

@@ -21,6 +21,14 @@ import threading
 MODULES = ("torch", "trainer.behavior", "trainer.artifacts.onnx_export", "onnx")
 
 
+_started: list[threading.Thread] = []
+
+
+def finished() -> bool:
+    """Whether the background imports are over (True if they were never started)."""
+    return not any(thread.is_alive() for thread in _started)
+
+
 def start(modules: tuple[str, ...] = MODULES) -> threading.Thread:
     """Import ``modules`` one after another in a daemon thread (errors are left to the main
     thread's own import of the same module)."""
@@ -34,4 +42,5 @@ def start(modules: tuple[str, ...] = MODULES) -> threading.Thread:
 
     thread = threading.Thread(target=run, name="mlagents-like-warmup", daemon=True)
     thread.start()
+    _started.append(thread)
     return thread

@@ -3,7 +3,8 @@
 The Gaussian (PPO's actions, clipped for the environment), SAC's tanh-squashed Gaussian and the
 categorical of each discrete branch; numpy_distributions.py is the same, name for name, in numpy.
 
-The small constant EPSILON matches ML-Agents so log-probs and entropies agree numerically.
+The small constant EPSILON (numpy_distributions.py, imported here) matches ML-Agents so log-probs
+and entropies agree numerically.
 Shapes: n = batch, c = continuous dimensions, k = options of one discrete branch.
 """
 from __future__ import annotations
@@ -12,9 +13,9 @@ import math
 
 import torch
 
-EPSILON = 1e-7
+from trainer.common.numpy_distributions import EPSILON, MASKED_LOGIT_OFFSET
+
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
-MASKED_LOGIT_OFFSET = 1e8
 
 
 def gaussian_log_prob(actions: torch.Tensor, mu: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:

@@ -2,7 +2,8 @@
 
 ML-Agents initialises a Linear layer's kernel with a named scheme (Kaiming-He normal computed with
 ``nonlinearity="linear"``, i.e. std = 1/sqrt(fan_in), or Xavier-Glorot uniform) and then multiplies the
-whole kernel by a ``gain``; biases start at zero.
+whole kernel by a ``gain``; biases start at zero. The draws are initial_parameters.py's, in numpy
+(one initialisation, with or without torch).
 
 The kernel W [out, in] is stored input-major: W^T is the contiguous array. numpy_net.py reads the
 layers through numpy views of their storage, and OpenBLAS multiplies a small batch by a
@@ -12,28 +13,29 @@ the layout.
 """
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
 
-KAIMING_NORMAL = "kaiming_normal"
-XAVIER_UNIFORM = "xavier_uniform"
+from trainer.common.initial_parameters import KAIMING_NORMAL, XAVIER_UNIFORM, kernel
+
+
+def torch_seeded_rng() -> np.random.Generator:
+    """A numpy generator seeded from torch's global one: layers built in torch draw their initial
+    weights with initial_parameters' functions, reproducibly under ``torch.manual_seed``."""
+    return np.random.default_rng(int(torch.randint(0, 2**62, ())))
 
 
 def linear_layer(
     input_size: int, output_size: int, kernel_init: str = XAVIER_UNIFORM, gain: float = 1.0
 ) -> nn.Linear:
-    """Linear(input_size, output_size) with ``kernel_init`` scaled by ``gain`` and a zero bias."""
+    """Linear(input_size, output_size) with ``kernel_init`` scaled by ``gain`` and a zero bias
+    (initial_parameters.kernel, W^T contiguous)."""
     layer = nn.Linear(input_size, output_size)
+    weight = kernel(torch_seeded_rng(), output_size, input_size, kernel_init, gain)
+    layer.weight = nn.Parameter(torch.from_numpy(np.ascontiguousarray(weight.T)).t())
     with torch.no_grad():
-        if kernel_init == KAIMING_NORMAL:
-            nn.init.kaiming_normal_(layer.weight, nonlinearity="linear")
-        elif kernel_init == XAVIER_UNIFORM:
-            nn.init.xavier_uniform_(layer.weight)
-        else:
-            raise ValueError(f"unknown kernel_init {kernel_init!r}")
-        layer.weight.mul_(gain)
         layer.bias.zero_()
-    layer.weight = nn.Parameter(layer.weight.detach().t().contiguous().t())  # the same values, W^T contiguous
     return layer
 
 

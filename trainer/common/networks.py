@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -21,11 +22,12 @@ from trainer.errors import ConfigError
 from trainer.common.distributions import mask_logits
 from trainer.common.encoders import VectorInput, make_visual_encoder
 from trainer.common.hyperparams import NetworkHyperparams
-from trainer.common.layers import KAIMING_NORMAL, XAVIER_UNIFORM, hidden_layers, linear_layer
+from trainer.common.initial_parameters import (BRANCH_GAIN, KAIMING_NORMAL, MODEL_EXPORT_VERSION, MU_GAIN,
+                                               XAVIER_UNIFORM, lstm_parameters)
+from trainer.common.layers import hidden_layers, linear_layer, torch_seeded_rng
+from trainer.common.numpy_net import LOG_SIGMA_MAX, LOG_SIGMA_MIN  # the clamp of a squashed (SAC) actor's log sigma
 from protos.types import ActionSpec, ObservationSpec
 
-MODEL_EXPORT_VERSION = 3
-LOG_SIGMA_MIN, LOG_SIGMA_MAX = -20.0, 2.0  # the clamp of a squashed (SAC) actor's log sigma
 
 
 def check_network_settings(hyperparams: NetworkHyperparams) -> None:
@@ -36,23 +38,14 @@ def check_network_settings(hyperparams: NetworkHyperparams) -> None:
 class LSTMMemory(nn.Module):
     """nn.LSTM (batch first) whose state travels as one tensor: memories [1, n_seq, 2 * hidden]."""
 
-    FORGET_BIAS = 1.0
-
     def __init__(self, input_size: int, memory_size: int):
         super().__init__()
         self.hidden_size = memory_size // 2
         self.lstm = nn.LSTM(input_size, self.hidden_size, 1, batch_first=True)
-        with torch.no_grad():
-            for name, param in self.lstm.named_parameters():
-                for block in param.data.chunk(4, dim=0):  # gates i, f, g, o
-                    if "weight" in name:
-                        nn.init.xavier_uniform_(block)
-                    else:
-                        block.zero_()
-                if "bias" in name:
-                    param.data[self.hidden_size:2 * self.hidden_size] += self.FORGET_BIAS
-        for name in ("weight_ih_l0", "weight_hh_l0"):  # stored input-major, as Linear kernels (layers.py)
-            setattr(self.lstm, name, nn.Parameter(getattr(self.lstm, name).detach().t().contiguous().t()))
+        initial = lstm_parameters(torch_seeded_rng(), input_size, self.hidden_size)
+        for name, value in initial.items():  # kernels stored input-major, as Linear kernels (layers.py)
+            setattr(self.lstm, name, nn.Parameter(torch.from_numpy(np.ascontiguousarray(value.T)).t()
+                                                  if value.ndim == 2 else torch.from_numpy(value)))
 
     def forward(self, inputs: torch.Tensor, memories: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """inputs [n_seq, L, in], memories [1, n_seq, m] -> (outputs [n_seq, L, m/2], memories [1, n_seq, m])."""
@@ -162,13 +155,13 @@ class Actor(nn.Module):
         hidden = self.network_body.output_size
         self.mu: nn.Linear | None = None
         if action_spec.continuous_size > 0:
-            self.mu = linear_layer(hidden, action_spec.continuous_size, KAIMING_NORMAL, 0.2)
+            self.mu = linear_layer(hidden, action_spec.continuous_size, KAIMING_NORMAL, MU_GAIN)
             if squashed:
-                self.log_sigma_head = linear_layer(hidden, action_spec.continuous_size, KAIMING_NORMAL, 0.2)
+                self.log_sigma_head = linear_layer(hidden, action_spec.continuous_size, KAIMING_NORMAL, MU_GAIN)
             else:
                 self.log_sigma = nn.Parameter(torch.zeros(1, action_spec.continuous_size))
         self.discrete_branches = nn.ModuleList(
-            linear_layer(hidden, size, KAIMING_NORMAL, 0.1) for size in action_spec.discrete_branches
+            linear_layer(hidden, size, KAIMING_NORMAL, BRANCH_GAIN) for size in action_spec.discrete_branches
         )
         offsets = [0]
         for size in action_spec.discrete_branches:

@@ -21,8 +21,10 @@ import math
 
 import numpy as np
 
-from trainer.common.distributions import EPSILON, MASKED_LOGIT_OFFSET
 
+# the constants of both modules, here so that acting needs no torch (distributions.py imports them)
+EPSILON = 1e-7  # as ML-Agents, so log-probs and entropies agree numerically
+MASKED_LOGIT_OFFSET = 1e8
 LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))  # a Python float: float32 arithmetic, as torch's
 _LOG_SQRT_2PI_FLOAT64 = np.float64(0.5 * np.log(2 * np.pi))
 _LOG_2 = np.log(2.0)

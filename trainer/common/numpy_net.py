@@ -28,19 +28,28 @@ Math (same as Actor.heads / Critic.forward): x_i -> clip((x_i - mean_i)/sqrt(var
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Mapping, Sequence
+
 import numpy as np
-import torch
-from torch import nn
 
 from trainer.common import numpy_distributions
-from trainer.common.encoders import VectorInput
-from trainer.common.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN, Actor, Critic, NetworkBody
+
+if TYPE_CHECKING:  # this module imports no torch: the first actions are decided before it is loaded
+    import torch
+
+    from trainer.common.networks import Actor, Critic
+
+# networks.Actor.log_sigma_of's clamp of a squashed (SAC) actor's log sigma (networks.py imports it)
+LOG_SIGMA_MIN, LOG_SIGMA_MAX = -20.0, 2.0
+BODY = "network_body."
 
 
 def supports(module: Actor | Critic, recurrent: bool = False) -> bool:
     """Vector observations only, not a critic on the actor's body (the numpy update's gradients
     assume separate bodies), and no LSTM unless ``recurrent`` (forward passes step the LSTM in
     numpy; the numpy update does not train one)."""
+    from trainer.common.encoders import VectorInput
+
     body = module.network_body
     return (not getattr(module, "shared", False) and (recurrent or body.lstm is None)
             and all(isinstance(e, VectorInput) for e in body.observation_encoder.encoders))
@@ -51,9 +60,14 @@ def view(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().numpy()
 
 
-def _linear(module: nn.Linear) -> tuple[np.ndarray, np.ndarray]:
-    """(W^T [in, out], b [out]) of a Linear layer as views (W^T contiguous: see layers.py)."""
-    return view(module.weight).T, view(module.bias)
+def views(module: torch.nn.Module) -> dict[str, np.ndarray]:
+    """A module's state dict (parameters and buffers, by name) as numpy views of its tensors."""
+    return {name: view(tensor) for name, tensor in module.state_dict(keep_vars=True).items()}
+
+
+def _linear(params: Mapping[str, np.ndarray], name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(W^T [in, out], b [out]) of the Linear layer ``name`` (W^T contiguous: see layers.py)."""
+    return params[f"{name}.weight"].T, params[f"{name}.bias"]
 
 
 class _Derived:
@@ -85,25 +99,40 @@ def _sigmoid(x: np.ndarray) -> np.ndarray:
 
 
 class NumpyBody:
-    """A NetworkBody's normalisers, hidden Linear layers and LSTM, as views of its torch tensors.
+    """A NetworkBody's normalisers, hidden Linear layers and LSTM, read by name from its state
+    dict ``params`` (networks.NetworkBody's names; numpy views of the torch tensors, or
+    initial_parameters' arrays before torch is loaded).
 
-    ``kernels``: (W^T, b) per hidden layer; ``linears``: the torch layers (the update's gradients
-    are keyed by their parameters)."""
+    ``kernels``: (W^T, b) per hidden layer; ``linears``: the torch layers when built from a
+    module (the update's gradients are keyed by their parameters)."""
 
-    def __init__(self, network_body: NetworkBody) -> None:
-        self.linears = [m for m in network_body.hidden if isinstance(m, nn.Linear)]
-        self.kernels = [_linear(m) for m in self.linears]
-        self.normalizers = [
-            None if encoder.normalizer is None else _Derived(_mean_std, *(view(buffer) for buffer in (
-                encoder.normalizer.running_mean, encoder.normalizer.running_variance,
-                encoder.normalizer.normalization_steps)))
-            for encoder in network_body.observation_encoder.encoders]
-        self.memory_size = network_body.memory_size
+    def __init__(self, params: Mapping[str, np.ndarray], observations: int, linears: list | None = None) -> None:
+        self.linears = linears
+        self.kernels = []
+        while f"{BODY}hidden.{2 * len(self.kernels)}.weight" in params:  # Linear, Swish, Linear, ...
+            self.kernels.append(_linear(params, f"{BODY}hidden.{2 * len(self.kernels)}"))
+        self.normalizers = []
+        for index in range(observations):
+            prefix = f"{BODY}observation_encoder.encoders.{index}.normalizer."
+            self.normalizers.append(_Derived(_mean_std, *(params[prefix + name] for name in (
+                "running_mean", "running_variance", "normalization_steps"))) if prefix + "running_mean" in params
+                else None)
         self.lstm = None  # (W_ih^T [in, 4h], W_hh^T [h, 4h], b_ih + b_hh [4h]) of the LSTM, if any
-        if network_body.lstm is not None:
-            lstm = network_body.lstm.lstm
-            self.lstm = (view(lstm.weight_ih_l0).T, view(lstm.weight_hh_l0).T,
-                         _Derived(np.add, view(lstm.bias_ih_l0), view(lstm.bias_hh_l0)))
+        self.memory_size = 0
+        lstm = f"{BODY}lstm.lstm."
+        if lstm + "weight_hh_l0" in params:
+            self.lstm = (params[lstm + "weight_ih_l0"].T, params[lstm + "weight_hh_l0"].T,
+                         _Derived(np.add, params[lstm + "bias_ih_l0"], params[lstm + "bias_hh_l0"]))
+            self.memory_size = 2 * params[lstm + "weight_hh_l0"].shape[1]
+
+    @classmethod
+    def of(cls, module: Actor | Critic) -> "NumpyBody":
+        """The body of a torch Actor or Critic, as views of its tensors."""
+        from torch import nn
+
+        body = module.network_body
+        return cls({BODY + name: value for name, value in views(body).items()},
+                   len(body.observation_encoder.encoders), [m for m in body.hidden if isinstance(m, nn.Linear)])
 
     def input(self, obs: list[np.ndarray]) -> np.ndarray:
         """The hidden layers' input: each observation normalised and clipped, then concatenated."""
@@ -192,22 +221,23 @@ class NumpyBody:
 
 
 class _NumpyModule:
-    """What NumpyActor and NumpyCritic share: the torch module and its body."""
+    """What NumpyActor and NumpyCritic share: the torch module (None before torch is loaded) and its body."""
 
-    def __init__(self, module: Actor | Critic) -> None:
-        if not supports(module, recurrent=True):
+    def __init__(self, module: Actor | Critic | None, body: NumpyBody) -> None:
+        if module is not None and not supports(module, recurrent=True):
             raise ValueError(f"{type(self).__name__} handles vector observations only")
         self.module = module
-        self.body = NumpyBody(module.network_body)
-        self.recurrent = module.network_body.lstm is not None  # (nn.Module attribute reads are slow)
+        self.body = body
+        self.recurrent = body.lstm is not None  # (nn.Module attribute reads are slow)
 
 
 class NumpyCritic(_NumpyModule):
     """The critic's forward pass in numpy (value estimates, and the numpy update)."""
 
     def __init__(self, critic: Critic) -> None:
-        super().__init__(critic)
-        self.heads = {name: _linear(head) for name, head in critic.value_heads.items()}  # (W^T, b)
+        super().__init__(critic, NumpyBody.of(critic))
+        params = views(critic)
+        self.heads = {name: _linear(params, f"value_heads.{name}") for name in critic.value_heads}  # (W^T, b)
 
     def __call__(self, obs: list[np.ndarray]) -> dict[str, np.ndarray]:
         """Value estimates per reward signal, float32 [n] each."""
@@ -230,18 +260,39 @@ def _gaussian_terms(log_sigma: np.ndarray) -> tuple:
 
 
 class NumpyActor(_NumpyModule):
-    """The actor's heads in numpy (deciding actions, and the numpy update)."""
+    """The actor's heads in numpy (deciding actions, and the numpy update).
+
+    Built from a torch Actor (``NumpyActor(actor)``: views of its tensors) or, before torch is
+    loaded, from initial_parameters.actor_parameters' state dict (``from_parameters``)."""
 
     def __init__(self, actor: Actor) -> None:
-        super().__init__(actor)
-        self.mu = _linear(actor.mu) if actor.mu is not None else None  # (W^T, b)
-        fixed_sigma = actor.mu is not None and not actor.squashed
-        self.log_sigma = view(actor.log_sigma) if fixed_sigma else None  # [1, c]
+        if not supports(actor, recurrent=True):
+            raise ValueError("NumpyActor handles vector observations only")
+        self._read(views(actor), actor.action_spec.discrete_branches, NumpyBody.of(actor))
+        self.module = actor
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, np.ndarray], observations: int,
+                        discrete_branches: Sequence[int]) -> "NumpyActor":
+        """An actor without torch: ``params`` is networks.Actor's state dict as numpy arrays."""
+        actor = cls.__new__(cls)
+        actor._read(params, discrete_branches, NumpyBody(params, observations))
+        return actor
+
+    def _read(self, params: Mapping[str, np.ndarray], discrete_branches: Sequence[int], body: NumpyBody) -> None:
+        super().__init__(None, body)
+        self.params = params  # the state dict, by name
+        self.mu = _linear(params, "mu") if "mu.weight" in params else None  # (W^T, b)
+        fixed_sigma = "log_sigma" in params
+        self.log_sigma = params["log_sigma"] if fixed_sigma else None  # [1, c]
         self.gaussian = _Derived(_gaussian_terms, self.log_sigma) if fixed_sigma else None
         # a squashed (SAC) actor's log sigma is a head of its own: (W^T, b)
-        self.log_sigma_head = _linear(actor.log_sigma_head) if actor.mu is not None and actor.squashed else None
-        self.branches = [_linear(b) for b in actor.discrete_branches]  # (W^T, b) per branch
-        self.offsets = actor.mask_offsets
+        self.log_sigma_head = _linear(params, "log_sigma_head") if "log_sigma_head.weight" in params else None
+        self.branches = [_linear(params, f"discrete_branches.{b}") for b in range(len(discrete_branches))]
+        offsets = [0]
+        for size in discrete_branches:
+            offsets.append(offsets[-1] + size)
+        self.offsets = offsets  # branch b's columns of the action mask: offsets[b]:offsets[b + 1]
 
     def heads(self, obs: list[np.ndarray], action_mask: np.ndarray | None, memories: np.ndarray | None = None
               ) -> tuple[np.ndarray | None, list[np.ndarray], np.ndarray | None]:

@@ -1,19 +1,19 @@
 """The acting policy: one batched forward pass for every deciding agent of a behavior.
 
-Continuous actions are sampled from an unbounded Gaussian; the raw sample is kept for log-probs and
-the environment receives clamp(a, -3, 3) / 3. Discrete actions are a multinomial sample per branch.
+Vector-observation actors on the CPU decide in numpy (numpy_policy.py, with numpy_net's views of
+this actor's tensors); others in torch here. Continuous actions are sampled from an unbounded
+Gaussian; the raw sample is kept for log-probs and the environment receives clamp(a, -3, 3) / 3.
+Discrete actions are a multinomial sample per branch.
 """
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 import torch
 
-from trainer.common import numpy_distributions as nd
-from trainer.common import numpy_net
+from trainer.common import initial_parameters, numpy_net
 from trainer.common.distributions import (
     categorical_entropy,
     categorical_log_prob,
@@ -22,29 +22,21 @@ from trainer.common.distributions import (
     gaussian_log_prob,
 )
 from trainer.common.networks import Actor
+from trainer.common.numpy_policy import CONTINUOUS_CLIP, NumpyPolicy, PolicyOutput, noise_generator
 from trainer.common.hyperparams import NetworkHyperparams
 from protos.types import ActionTuple, BehaviorSpec
 
-CONTINUOUS_CLIP = 3.0
-_MAX, _SUM = np.maximum.reduce, np.add.reduce  # ndarray.max/sum without their Python wrappers
+__all__ = ["CONTINUOUS_CLIP", "Policy", "PolicyOutput", "allowed_from_mask", "initial_actor"]
 
 
-@dataclass(frozen=True)
-class PolicyOutput:
-    """What one call to ``Policy.act`` produced for n agents."""
-
-    env_actions: ActionTuple  # continuous float32 [n, c] in [-1, 1]; discrete int32 [n, b]
-    continuous_raw: np.ndarray  # float32 [n, c] unclamped samples (stored for log-probs)
-    discrete: np.ndarray  # int32 [n, b]
-    log_probs: np.ndarray  # float32 [n, c + b], per continuous dimension then per discrete branch
-    # computes ``entropy`` when first read: the rollout never reads it, so deciding skips it
-    entropy_of: Callable[[], np.ndarray] = field(repr=False, compare=False)
-    memories: np.ndarray | None = None  # float32 [n, memory_size]: each agent's next memory (LSTM only)
-
-    @functools.cached_property
-    def entropy(self) -> np.ndarray:
-        """float32 [n]: mean over the Gaussian's dimensions + sum over the discrete branches."""
-        return self.entropy_of()
+def initial_actor(behavior_spec: BehaviorSpec, hyperparams: NetworkHyperparams, squashed: bool, seed: int
+                  ) -> dict[str, np.ndarray] | None:
+    """The actor's initial state dict drawn in numpy from ``seed`` (initial_parameters.py), or
+    None for visual observations (then the torch modules initialise themselves)."""
+    spec = behavior_spec.action_spec
+    return initial_parameters.actor_parameters([tuple(o.shape) for o in behavior_spec.observation_specs],
+                                               spec.continuous_size, spec.discrete_branches, hyperparams,
+                                               squashed, seed)
 
 
 def allowed_from_mask(action_mask: np.ndarray | None) -> torch.Tensor | None:
@@ -67,21 +59,40 @@ class Policy:
         self.action_spec = behavior_spec.action_spec
         self.hyperparams = hyperparams
         self.device = torch.device(device)
+        initial = initial_actor(behavior_spec, hyperparams, self.SQUASHED, seed)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
             self.actor = Actor(behavior_spec.observation_specs, self.action_spec, hyperparams,
-                               squashed=self.SQUASHED).to(self.device)
-        self.generator = torch.Generator(device=self.device)
+                               squashed=self.SQUASHED)
+        if initial is not None:  # strict: every name and shape of networks.Actor
+            self.actor.load_state_dict({k: torch.from_numpy(v) for k, v in initial.items()})
+        self.actor.to(self.device)
+        self.generator = torch.Generator(device=self.device)  # the torch path's noise (visual, GPU)
         self.generator.manual_seed(seed + 1)
         # vector-only actors on the CPU decide in numpy (see numpy_net for why)
         use_numpy = self.device.type == "cpu" and numpy_net.supports(self.actor, recurrent=True)
         self.memory_size = hyperparams.memory_size  # > 0: act takes and returns each agent's memory
         self._numpy_actor = numpy_net.NumpyActor(self.actor) if use_numpy else None
+        self.sampler = NumpyPolicy(self._numpy_actor, noise_generator(seed), self.SQUASHED,
+                                   hyperparams.deterministic)
 
     @property
     def numpy_actor(self) -> numpy_net.NumpyActor | None:
         """The actor in numpy (vector observations on the CPU), or None: ``act`` uses torch."""
         return self._numpy_actor
+
+    def take_over(self, first: NumpyPolicy) -> None:
+        """Continue from the policy that decided a run's first actions before torch was loaded
+        (trainer/first_steps.py): the actor loads exactly its arrays and the noise generator
+        continues where it is, so acting goes on as if this policy had decided from the start."""
+        self.actor.load_state_dict({k: torch.from_numpy(np.asarray(v)) for k, v in first.actor.params.items()})
+        self.sampler.noise = first.noise
+
+    def reseed_noise(self, seed: int) -> None:
+        """Data-parallel ranks (trainer/distributed.py): this rank's own sampling seed."""
+        self.generator.manual_seed(seed)
+        self.sampler.noise = noise_generator(seed - 1)
+
     def _to_tensors(self, obs: Sequence[np.ndarray]) -> list[torch.Tensor]:
         return [torch.as_tensor(np.asarray(o, dtype=np.float32), device=self.device) for o in obs]
 
@@ -95,7 +106,7 @@ class Policy:
         """
         deterministic = deterministic or self.hyperparams.deterministic
         if self._numpy_actor is not None:
-            return self._act_numpy(obs, action_mask, deterministic, memories)
+            return self.sampler.act(obs, action_mask, deterministic, memories)
         allowed = allowed_from_mask(action_mask)
         with torch.inference_mode():
             tensors = self._to_tensors(obs)
@@ -145,64 +156,6 @@ class Policy:
             entropy_of=functools.partial(np.asarray, entropy.cpu().numpy()),  # already computed
             memories=memories_out,
         )
-
-    def _act_numpy(self, obs: Sequence[np.ndarray], action_mask: np.ndarray | None,
-                   deterministic: bool, memories: np.ndarray | None = None) -> PolicyOutput:
-        """``act`` in numpy: same distributions, noise drawn from the same torch generator.
-
-        Runs once per decision step, often for one agent, so it is written for numpy's per-call
-        cost: reductions through the ufuncs (``ndarray.max``/``sum`` add a Python wrapper each),
-        no copies of arrays that already have their dtype."""
-        mu, logits, memories_out = self._numpy_actor.heads(list(obs), action_mask, memories)
-        n = len(obs[0])
-        log_parts: list[np.ndarray] = []
-        continuous_entropy = None
-        if mu is not None:
-            sigma, continuous_entropy = self._numpy_actor.gaussian()
-            if deterministic:
-                raw = mu
-            else:
-                noise = torch.randn(mu.shape, generator=self.generator).numpy()
-                raw = mu + noise * sigma
-            log_parts.append(nd.gaussian_log_prob(raw, mu, self._numpy_actor.log_sigma, float64_constant=True))
-            raw = raw.astype(np.float32, copy=False)
-            env_continuous = np.minimum(np.maximum(raw, -CONTINUOUS_CLIP), CONTINUOUS_CLIP) / CONTINUOUS_CLIP
-        else:
-            raw = env_continuous = np.zeros((n, 0), dtype=np.float32)
-        discrete, branch_probs = self._sample_discrete_numpy(logits, n, deterministic, log_parts)
-        log_probs = log_parts[0] if len(log_parts) == 1 else np.concatenate(log_parts, axis=1)
-        return PolicyOutput(
-            env_actions=ActionTuple(env_continuous, discrete),
-            continuous_raw=raw,
-            discrete=discrete,
-            log_probs=log_probs.astype(np.float32, copy=False),
-            entropy_of=lambda: nd.combined_entropy(
-                continuous_entropy, [nd.categorical_entropy(probs) for probs in branch_probs], n),
-            memories=memories_out,
-        )
-
-    def _sample_discrete_numpy(self, logits: list[np.ndarray], n: int, deterministic: bool,
-                               log_parts: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
-        """One option per branch from masked logits [n, k_b] (argmax if ``deterministic``, else
-        the policy's torch generator): (discrete int32 [n, b], probabilities per branch); each
-        branch's log-prob [n, 1] is appended to ``log_parts``."""
-        discrete = np.empty((n, len(logits)), dtype=np.int32)
-        branch_probs = []
-        for index, branch_logits in enumerate(logits):
-            probs = nd.softmax(branch_logits)
-            if deterministic:
-                action = probs.argmax(axis=1)
-            else:
-                u = torch.rand(n, generator=self.generator).numpy()[:, None]
-                action = _SUM(probs.cumsum(axis=1) <= u, axis=1)  # an option with probability > 0
-                if n and _MAX(action) >= probs.shape[1]:
-                    # rounding pushed some u past the last cumulative sum: the last allowed option
-                    last_allowed = probs.shape[1] - 1 - (probs[:, ::-1] > 0).argmax(axis=1)
-                    action = np.minimum(action, last_allowed)
-            discrete[:, index] = action
-            log_parts.append(nd.categorical_log_prob(probs, action)[:, None])
-            branch_probs.append(probs)
-        return discrete, branch_probs
 
     def evaluate(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None,
                  continuous_actions: torch.Tensor, discrete_actions: torch.Tensor,

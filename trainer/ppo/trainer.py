@@ -27,6 +27,7 @@ from trainer.common.policy import Policy
 from trainer.common.recurrent_critic import RecurrentCriticValues
 from trainer.common.reward_providers import Experience, load_providers, make_providers
 from trainer.common.schedules import BETA_FLOOR, EPSILON_FLOOR, LEARNING_RATE_FLOOR, decay
+from trainer.common.numpy_policy import noise_state, set_noise_state
 from trainer.common.trainer_interface import Trainer
 from protos.types import BehaviorSpec
 
@@ -402,6 +403,7 @@ class PPOTrainer(RecurrentCriticValues, Trainer):
             "Optimizer:critic": self.critic.state_dict(),
             "RNG": {
                 "policy_sampling": self.policy.generator.get_state(),
+                "policy_noise": torch.from_numpy(noise_state(self.policy.sampler.noise)),
                 "minibatch_shuffle": self.shuffle_generator.get_state(),
             },
         }
@@ -434,6 +436,8 @@ class PPOTrainer(RecurrentCriticValues, Trainer):
         rng = state.get("RNG")
         if rng is not None:
             self.policy.generator.set_state(rng["policy_sampling"])
+            if "policy_noise" in rng:  # the numpy acting noise (numpy_policy.py); older checkpoints: none
+                set_noise_state(self.policy.sampler.noise, rng["policy_noise"].numpy())
             self.shuffle_generator.set_state(rng["minibatch_shuffle"])
 
     def restart_counters(self) -> None:

@@ -38,7 +38,7 @@ import torch
 from trainer.common import numpy_distributions as nd
 from trainer.common import numpy_net
 from trainer.common.distributions import EPSILON
-from trainer.common.networks import LOG_SIGMA_MAX, LOG_SIGMA_MIN
+from trainer.common.numpy_net import LOG_SIGMA_MAX, LOG_SIGMA_MIN
 from trainer.sac import losses
 from trainer.sac.policy import policy_entropy
 

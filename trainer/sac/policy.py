@@ -4,29 +4,21 @@ continuous actions and the PPO policy's categorical sampling for discrete branch
 The environment receives tanh(sample) in (-1, 1) (no clipping), and the same squashed action is
 what the replay buffer stores (``continuous_raw``): the Q networks take squashed actions.
 Deterministic acting uses tanh(mu). As for PPO, vector-observation actors on the CPU decide in
-numpy (numpy_net.py says why), drawing noise from the same torch generator. With
+numpy (numpy_net.py says why); both draw their noise in trainer/common/numpy_policy.py. With
 network_settings.memory the actor's LSTM state travels with each agent as PPO's does (``act``
 takes and returns memories; ``sample_with_grad`` reads rows as sequences).
 """
 from __future__ import annotations
 
-import functools
 from typing import Sequence
 
 import numpy as np
 import torch
 
-from protos.types import ActionTuple
-from trainer.common import numpy_distributions as nd
 from trainer.common.distributions import categorical_option_log_probs, squashed_log_prob, squashed_sample
-from trainer.common.policy import Policy, PolicyOutput, allowed_from_mask
-
-def policy_entropy(rows: int, log_sigma: np.ndarray | None, branch_probs: list[np.ndarray]) -> np.ndarray:
-    """float32 [rows], for ``Policy/Entropy``: the Gaussian's mean entropy over its dimensions
-    *before* the tanh (the squashed one has no closed form) plus the entropy of each of
-    ``branch_probs`` ([rows, k] each; one array of every branch side by side sums them all)."""
-    return nd.combined_entropy(None if log_sigma is None else nd.gaussian_entropy(log_sigma),
-                               [nd.categorical_entropy(probs) for probs in branch_probs], rows)
+from trainer.common.numpy_policy import PolicyOutput
+from trainer.common.numpy_policy import squashed_entropy as policy_entropy  # (numpy_step.py's name)
+from trainer.common.policy import Policy, allowed_from_mask
 
 
 class SACPolicy(Policy):
@@ -37,47 +29,24 @@ class SACPolicy(Policy):
         """Actions for n agents in one forward pass (see Policy.act for the arguments)."""
         deterministic = deterministic or self.hyperparams.deterministic
         n = len(obs[0])
-        log_parts: list[np.ndarray] = []
-        memories_out = None
         if self._numpy_actor is not None:
-            h, memories_out = self._numpy_actor.hidden(list(obs), memories)
-            mu, logits = self._numpy_actor.heads_of(h, action_mask)
-            log_sigma = self._numpy_actor.log_sigma_of(h) if mu is not None else None
-        else:
-            with torch.inference_mode():
-                if self.memory_size:
-                    memory_in = (torch.zeros((n, self.memory_size)) if memories is None
-                                 else torch.as_tensor(np.asarray(memories, dtype=np.float32)))
-                    encoding, memories_t = self.actor.network_body.forward_memory(
-                        self._to_tensors(obs), memory_in.to(self.device).unsqueeze(0), 1)
-                    memories_out = memories_t[0].cpu().numpy()
-                else:
-                    encoding = self.actor.network_body(self._to_tensors(obs))
-                allowed = allowed_from_mask(action_mask)
-                mu_t, logits_t = self.actor.heads_of(encoding, None if allowed is None else allowed.to(self.device))
-                log_sigma = None if mu_t is None else self.actor.log_sigma_of(encoding, mu_t).cpu().numpy()
-                mu = None if mu_t is None else mu_t.cpu().numpy()
-                logits = [branch.cpu().numpy() for branch in logits_t]
-        if mu is not None:
-            if deterministic:
-                raw, continuous = mu, np.tanh(mu)
+            return self.sampler.act(obs, action_mask, deterministic, memories)
+        memories_out = None
+        with torch.inference_mode():
+            if self.memory_size:
+                memory_in = (torch.zeros((n, self.memory_size)) if memories is None
+                             else torch.as_tensor(np.asarray(memories, dtype=np.float32)))
+                encoding, memories_t = self.actor.network_body.forward_memory(
+                    self._to_tensors(obs), memory_in.to(self.device).unsqueeze(0), 1)
+                memories_out = memories_t[0].cpu().numpy()
             else:
-                raw, continuous = nd.squashed_sample(mu, log_sigma,
-                                                     torch.randn(mu.shape, generator=self.generator).numpy())
-            log_parts.append(nd.squashed_log_prob(raw, mu, log_sigma))
-            continuous = continuous.astype(np.float32, copy=False)
-        else:
-            continuous = np.zeros((n, 0), dtype=np.float32)
-        discrete, branch_probs = self._sample_discrete_numpy(logits, n, deterministic, log_parts)
-        log_probs = np.concatenate(log_parts, axis=1) if log_parts else np.zeros((n, 0), np.float32)
-        return PolicyOutput(
-            env_actions=ActionTuple(continuous, discrete),
-            continuous_raw=continuous,
-            discrete=discrete,
-            log_probs=log_probs.astype(np.float32, copy=False),
-            entropy_of=functools.partial(policy_entropy, n, log_sigma, branch_probs),
-            memories=memories_out,
-        )
+                encoding = self.actor.network_body(self._to_tensors(obs))
+            allowed = allowed_from_mask(action_mask)
+            mu_t, logits_t = self.actor.heads_of(encoding, None if allowed is None else allowed.to(self.device))
+            log_sigma = None if mu_t is None else self.actor.log_sigma_of(encoding, mu_t).cpu().numpy()
+            mu = None if mu_t is None else mu_t.cpu().numpy()
+            logits = [branch.cpu().numpy() for branch in logits_t]
+        return self.sampler.sample_squashed(mu, log_sigma, logits, n, deterministic, memories_out)
 
     def sample_with_grad(self, obs: Sequence[torch.Tensor], allowed: torch.Tensor | None, generator: torch.Generator,
                          memories: torch.Tensor | None = None, sequence_length: int = 1

@@ -35,6 +35,7 @@ from trainer.common.networks import Critic, NetworkBody
 from trainer.common.recurrent_critic import RecurrentCriticValues
 from trainer.common.reward_providers import Experience, load_providers, make_providers
 from trainer.common.schedules import LEARNING_RATE_FLOOR, decay
+from trainer.common.numpy_policy import noise_state, set_noise_state
 from trainer.common.trainer_interface import Trainer
 from trainer.common.trajectory import Trajectory
 from trainer.sac import losses, numpy_step
@@ -414,6 +415,7 @@ class SACTrainer(RecurrentCriticValues, Trainer):
                     "reward_signal_update_steps": torch.tensor(self.reward_signal_update_steps, dtype=torch.int64)},
             "RNG": {
                 "policy_sampling": self.policy.generator.get_state(),
+                "policy_noise": torch.from_numpy(noise_state(self.policy.sampler.noise)),
                 "replay_sampling": self.sample_generator.get_state(),
                 "update_noise": self.noise_generator.get_state(),
             },
@@ -445,6 +447,8 @@ class SACTrainer(RecurrentCriticValues, Trainer):
         rng = state.get("RNG")
         if rng is not None:
             self.policy.generator.set_state(rng["policy_sampling"])
+            if "policy_noise" in rng:  # the numpy acting noise (numpy_policy.py); older checkpoints: none
+                set_noise_state(self.policy.sampler.noise, rng["policy_noise"].numpy())
             self.sample_generator.set_state(rng["replay_sampling"])
             self.noise_generator.set_state(rng["update_noise"])
 
