@@ -48,7 +48,7 @@ behaviors:
   {behavior}:
     trainer_type: {trainer}
     hyperparameters: {hyper}
-    network_settings: {{normalize: {normalize}, hidden_units: 16, num_layers: 2}}
+    network_settings: {{normalize: {normalize}, hidden_units: 16, num_layers: 2{memory}}}
     reward_signals: {{extrinsic: {{gamma: 0.9, strength: 1.0}}}}
     max_steps: {steps}
     time_horizon: {horizon}
@@ -58,13 +58,15 @@ PPO = "{batch_size: 32, buffer_size: 128, num_epoch: 2, learning_rate: 3.0e-4}"
 SAC = "{batch_size: 32, buffer_size: 2000, buffer_init_steps: 100, steps_per_update: 4, learning_rate: 3.0e-4}"
 
 
-def run(tmp_path, mode: str, task: str, behavior: str, trainer: str, env: dict, normalize: bool = False):
+def run(tmp_path, mode: str, task: str, behavior: str, trainer: str, env: dict, normalize: bool = False,
+        memory: bool = False):
     folder = tmp_path / mode
     folder.mkdir()
     config = folder / "c.yaml"
     config.write_text(textwrap.dedent(CONFIG.format(
         behavior=behavior, trainer=trainer, hyper=SAC if trainer == "sac" else PPO,
-        normalize=str(normalize).lower(), steps=400, horizon=16)))
+        normalize=str(normalize).lower(), steps=400, horizon=16,
+        memory=", memory: {memory_size: 16, sequence_length: 8}" if memory else "")))
     (folder / "driver.py").write_text(DRIVER)
     seen = folder / "seen.json"
     r = subprocess.run([sys.executable, str(folder / "driver.py"), mode, str(seen), str(config),
@@ -76,13 +78,14 @@ def run(tmp_path, mode: str, task: str, behavior: str, trainer: str, env: dict, 
     return json.loads(seen.read_text()), state
 
 
-@pytest.mark.parametrize("task, behavior, trainer, normalize", [
-    ("basic", "Basic", "ppo", False), ("ball3d", "3DBall", "ppo", True), ("basic", "Basic", "sac", False),
-    ("pushblock", "PushBlock", "poca", True)])
+@pytest.mark.parametrize("task, behavior, trainer, normalize, memory", [
+    ("basic", "Basic", "ppo", False, False), ("ball3d", "3DBall", "ppo", True, False),
+    ("basic", "Basic", "sac", False, False), ("pushblock", "PushBlock", "poca", True, False),
+    ("pushblock", "PushBlock", "poca", False, True)])  # recurrent: each agent's memory handed over too
 def test_first_actions_go_out_before_torch_and_the_run_is_unchanged(tmp_path, env_no_proxy, task, behavior,
-                                                                   trainer, normalize):
-    late_seen, late = run(tmp_path, "late", task, behavior, trainer, env_no_proxy, normalize)
-    first_seen, first = run(tmp_path, "torch-first", task, behavior, trainer, env_no_proxy, normalize)
+                                                                   trainer, normalize, memory):
+    late_seen, late = run(tmp_path, "late", task, behavior, trainer, env_no_proxy, normalize, memory)
+    first_seen, first = run(tmp_path, "torch-first", task, behavior, trainer, env_no_proxy, normalize, memory)
     assert late_seen == {"torch_at_first_send": False}
     assert first_seen == {"torch_at_first_send": True}
     assert int(late["global_step"]["step"]) == int(first["global_step"]["step"]) >= 400
