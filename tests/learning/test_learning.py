@@ -22,6 +22,21 @@ def cumulative_reward(folder) -> list[tuple[int, float]]:
     return [(e.step, e.value) for e in acc.Scalars("Environment/Cumulative Reward")]
 
 
+def train_ball3d(tmp_path, env, seed: int) -> list[tuple[int, float]]:
+    """The PPO ball3d test's run with ``seed`` (bench/learning_seeds.py runs it with others):
+    its Environment/Cumulative Reward curve."""
+    cfg = tmp_path / "ball3d.yaml"
+    text = (ROOT / "configs" / "ball3d.yaml").read_text()
+    cfg.write_text(text.replace("max_steps: 500000", "max_steps: 120000")
+                       .replace("checkpoint_interval: 100000", "checkpoint_interval: 1000000"))
+    assert "max_steps: 120000" in cfg.read_text()
+    r = learn([str(cfg), "--env", "stub:ball3d", "--num-areas", "2", "--seed", str(seed), "--run-id", "b3",
+               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
+              cwd=tmp_path, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return cumulative_reward(tmp_path / "results" / "b3" / "3DBall")
+
+
 def test_basic_reaches_90_percent_of_optimal_within_20k_steps(tmp_path, env_no_proxy):
     """configs/basic.yaml as shipped (20,000 steps), 4 areas, seed 1: the last summary's mean
     return must be >= 0.9 * 0.93 (walk right 7 steps: 7 * -0.01 + 1.0)."""
@@ -44,16 +59,7 @@ def test_ball3d_learns_to_hold_the_ball(tmp_path, env_no_proxy):
     mean return >= 40 at the last summary (measured 1.43 at the first summary, 40.4 at the last
     since the initialisation is drawn in numpy, 2026-11-28; 1.48 and 70.2 with torch's generator
     before; with 500k steps, as the YAML is written, both trainers end at 100, see bench/train.py)."""
-    cfg = tmp_path / "ball3d.yaml"
-    text = (ROOT / "configs" / "ball3d.yaml").read_text()
-    cfg.write_text(text.replace("max_steps: 500000", "max_steps: 120000")
-                       .replace("checkpoint_interval: 100000", "checkpoint_interval: 1000000"))
-    assert "max_steps: 120000" in cfg.read_text()
-    r = learn([str(cfg), "--env", "stub:ball3d", "--num-areas", "2", "--seed", "3", "--run-id", "b3",
-               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
-              cwd=tmp_path, timeout=600, env=env_no_proxy)
-    assert r.returncode == 0, r.stderr[-3000:]
-    curve = cumulative_reward(tmp_path / "results" / "b3" / "3DBall")
+    curve = train_ball3d(tmp_path, env_no_proxy, seed=3)
     assert curve[-1][0] == 120000
     first, last = curve[0][1], curve[-1][1]
     assert first < 1.6, curve

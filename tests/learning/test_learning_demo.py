@@ -17,21 +17,27 @@ from unity_stub_env.tasks.basic import OPTIMAL_RETURN
 pytestmark = pytest.mark.slow
 
 
+def train_bc(tmp_path, env, seed: int) -> list[tuple[int, float]]:
+    """The BC test's run with ``seed`` (bench/learning_seeds.py runs it with others): a scripted
+    demonstration recorded, then configs/basic_bc.yaml; its Environment/Cumulative Reward curve."""
+    recorded = subprocess.run(
+        [sys.executable, "-m", "unity_stub_env.cli", "--task", "basic", "--record-demo", "demos/basic.demo",
+         "--policy", "scripted", "--demo-steps", "200"], cwd=tmp_path, capture_output=True, text=True,
+        timeout=120, env=env)
+    assert recorded.returncode == 0, recorded.stderr
+    shutil.copy(ROOT / "configs" / "basic_bc.yaml", tmp_path / "basic_bc.yaml")
+    r = learn(["basic_bc.yaml", "--env", "stub:basic", "--seed", str(seed), "--run-id", "bc",
+               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
+              cwd=tmp_path, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return cumulative_reward(tmp_path / "results" / "bc" / "Basic")
+
+
 def test_behavioral_cloning_alone_reaches_the_optimal_return_on_basic(tmp_path, env_no_proxy):
     """configs/basic_bc.yaml as shipped (3,000 steps, extrinsic strength 0), seed 1, one area,
     200 recorded expert steps: measured 0.352 at the first summary (500 steps), 0.926 at 1,500,
     0.930 (= optimal, 7 steps right) at the last."""
-    recorded = subprocess.run(
-        [sys.executable, "-m", "unity_stub_env.cli", "--task", "basic", "--record-demo", "demos/basic.demo",
-         "--policy", "scripted", "--demo-steps", "200"], cwd=tmp_path, capture_output=True, text=True,
-        timeout=120, env=env_no_proxy)
-    assert recorded.returncode == 0, recorded.stderr
-    shutil.copy(ROOT / "configs" / "basic_bc.yaml", tmp_path / "basic_bc.yaml")
-    r = learn(["basic_bc.yaml", "--env", "stub:basic", "--seed", "1", "--run-id", "bc",
-               "--results-dir", str(tmp_path / "results"), "--base-port", str(free_port_block())],
-              cwd=tmp_path, timeout=600, env=env_no_proxy)
-    assert r.returncode == 0, r.stderr[-3000:]
-    curve = cumulative_reward(tmp_path / "results" / "bc" / "Basic")
+    curve = train_bc(tmp_path, env_no_proxy, seed=1)
     assert curve[-1][0] == 3000
     assert curve[0][1] < 0.5 * OPTIMAL_RETURN, curve  # the first 500 steps are far from optimal...
     assert curve[-1][1] >= 0.99 * OPTIMAL_RETURN, curve  # ...the last summary is optimal

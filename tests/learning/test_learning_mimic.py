@@ -41,11 +41,15 @@ environment_parameters:
 """
 
 
-def test_mimic_stays_up_longer_after_64k_steps(tmp_path, env_no_proxy):
+def train_mimic(tmp_path, env, seed: int):
+    """The test's run with ``seed`` (bench/learning_seeds.py runs it with others): its TensorBoard events."""
     cfg = tmp_path / "mimic.yaml"
     cfg.write_text(textwrap.dedent(SMALL_MIMIC))
-    acc = train_on_stub(tmp_path, cfg, "mimic", "Mimic", env_no_proxy, num_areas=2, seed=1, run_id="m",
-                        timeout=900)
+    return train_on_stub(tmp_path, cfg, "mimic", "Mimic", env, num_areas=2, seed=seed, run_id="m", timeout=900)
+
+
+def test_mimic_stays_up_longer_after_64k_steps(tmp_path, env_no_proxy):
+    acc = train_mimic(tmp_path, env_no_proxy, seed=1)
     reward = [(e.step, e.value) for e in acc.Scalars("Environment/Cumulative Reward")]
     length = [e.value for e in acc.Scalars("Environment/Episode Length")]
     assert reward[-1][0] == 64000 and len(reward) == 8

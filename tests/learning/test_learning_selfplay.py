@@ -47,16 +47,21 @@ def random_player(seed):
     return lambda obs: rng.integers(0, 3, size=(len(obs), 2))
 
 
-def test_soccer_selfplay_elo_rises_and_the_policy_beats_a_random_player(tmp_path, env_no_proxy):
-    from unity_stub_env.tasks import make_task
-    from unity_stub_env.tasks.soccer import play_match
-
+def train_soccer(tmp_path, env, seed: int):
+    """The 1 v 1 test's run with ``seed`` (bench/learning_seeds.py runs it with others): its
+    TensorBoard events; the exported policy is tmp_path/results/s/Soccer.onnx."""
     cfg = tmp_path / "soccer.yaml"
     text = (ROOT / "configs" / "soccer.yaml").read_text()
     cfg.write_text(text.replace("max_steps: 200000", f"max_steps: {STEPS}"))
     assert f"max_steps: {STEPS}" in cfg.read_text()
-    acc = train_on_stub(tmp_path, cfg, "soccer", "Soccer", env_no_proxy, num_areas=16, seed=1, run_id="s",
-                        timeout=600)
+    return train_on_stub(tmp_path, cfg, "soccer", "Soccer", env, num_areas=16, seed=seed, run_id="s", timeout=600)
+
+
+def test_soccer_selfplay_elo_rises_and_the_policy_beats_a_random_player(tmp_path, env_no_proxy):
+    from unity_stub_env.tasks import make_task
+    from unity_stub_env.tasks.soccer import play_match
+
+    acc = train_soccer(tmp_path, env_no_proxy, seed=1)
     elo = [(e.step, e.value) for e in acc.Scalars("Self-play/ELO")]
     assert elo[-1][0] == STEPS
     assert abs(elo[0][1] - 1200) < 5, elo  # it starts at initial_elo...
