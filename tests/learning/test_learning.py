@@ -55,15 +55,20 @@ def test_basic_reaches_90_percent_of_optimal_within_20k_steps(tmp_path, env_no_p
 def test_ball3d_learns_to_hold_the_ball(tmp_path, env_no_proxy):
     """configs/ball3d.yaml (ML-Agents' 3DBall hyperparameters) cut to 120,000 steps, 2 areas
     (24 agents), seed 3. A policy that does nothing holds the ball ~13 decisions (mean return
-    ~1.35: +0.1 per decision, -1 at the fall; the maximum is 100). The documented threshold: a
-    mean return >= 40 at the last summary (measured 1.43 at the first summary, 40.4 at the last
-    since the initialisation is drawn in numpy, 2026-11-28; 1.48 and 70.2 with torch's generator
-    before; with 500k steps, as the YAML is written, both trainers end at 100, see bench/train.py)."""
+    ~1.35: +0.1 per decision, -1 at the fall; the maximum is 100); with 500k steps, as the YAML is
+    written, both trainers end at 100 (bench/train.py).
+
+    Measured over seeds (bench/learning_seeds.py --test ball3d, bench/RESULTS.md 2026-11-28): the
+    first summary 1.43..1.48, then 20.4..21.4 at 96k, 30.9..33.1 at 108k and 40.4, 67.2, 63.7 at
+    120k for seeds 3, 1, 2 with the numpy initialisation (torch's earlier one: seed 3 1.48 -> 70.2).
+    The last summaries sit on the steep part of the curve, so the value at 120k spreads widely
+    between seeds. Thresholds: the first summary < 1.6 (untrained), the last >= 20: about 15x the
+    untrained return, reached by every seed by 96k-108k, half the lowest seed's 40.4 at 120k."""
     curve = train_ball3d(tmp_path, env_no_proxy, seed=3)
     assert curve[-1][0] == 120000
     first, last = curve[0][1], curve[-1][1]
     assert first < 1.6, curve
-    assert last >= 40.0, curve
+    assert last >= 20.0, curve
 
 
 def test_sac_basic_reaches_90_percent_of_optimal_within_20k_steps(tmp_path, env_no_proxy):
@@ -82,8 +87,8 @@ def test_sac_basic_reaches_90_percent_of_optimal_within_20k_steps(tmp_path, env_
 
 def test_sac_ball3d_learns_to_hold_the_ball(tmp_path, env_no_proxy):
     """configs/ball3d_sac.yaml (ML-Agents' 3DBall SAC hyperparameters) cut to 84,000 steps (PPO's
-    test needs 120,000), 2 areas, seed 3: the same threshold as PPO's, a mean return >= 40 at the
-    last summary (measured 1.51 at the first summary, 9.4 at 60k, 92.4 at 72k, 100 at 84k; since
+    test needs 120,000), 2 areas, seed 3: a mean return >= 40 at the last summary (one seed
+    measured, not a spread: 1.51 at the first summary, 9.4 at 60k, 92.4 at 72k, 100 at 84k; since
     the initialisation is drawn in numpy, 2026-11-28: 1.36, 4.1, 37.7, 100)."""
     cfg = tmp_path / "ball3d_sac.yaml"
     text = (ROOT / "configs" / "ball3d_sac.yaml").read_text()

@@ -35,9 +35,18 @@ def train_bc(tmp_path, env, seed: int) -> list[tuple[int, float]]:
 
 def test_behavioral_cloning_alone_reaches_the_optimal_return_on_basic(tmp_path, env_no_proxy):
     """configs/basic_bc.yaml as shipped (3,000 steps, extrinsic strength 0), seed 1, one area,
-    200 recorded expert steps: measured 0.352 at the first summary (500 steps), 0.926 at 1,500,
-    0.930 (= optimal, 7 steps right) at the last."""
+    200 recorded expert steps. With the extrinsic reward at strength 0 only the demonstration can
+    bring the policy to the optimum; a policy that has not learned scores far below it (uniform
+    random actions: 0.046 expected, by dynamic programming over the corridor; the optimum 0.93).
+
+    Measured over seeds (bench/learning_seeds.py --test bc, bench/RESULTS.md 2026-11-28): the last
+    summary 0.929..0.930 for every one of seeds 1-5 with either initialisation; the first summary
+    (steps 0-500, half of them after the first BC update at step 256) 0.35..0.52 with the numpy
+    initialisation and 0.34..0.57 with torch's earlier one. Thresholds: the last summary >= 0.99 x
+    optimal, and the first below 0.75 x optimal (0.70): the run starts from an untrained policy,
+    not from one that already plays optimally (which would show 0.93 at once); every seed's first
+    summary was <= 0.61 x optimal."""
     curve = train_bc(tmp_path, env_no_proxy, seed=1)
     assert curve[-1][0] == 3000
-    assert curve[0][1] < 0.5 * OPTIMAL_RETURN, curve  # the first 500 steps are far from optimal...
+    assert curve[0][1] < 0.75 * OPTIMAL_RETURN, curve  # the first 500 steps start untrained...
     assert curve[-1][1] >= 0.99 * OPTIMAL_RETURN, curve  # ...the last summary is optimal

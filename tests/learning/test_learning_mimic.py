@@ -6,13 +6,18 @@ The thesis' configuration (2 x 1024, up to 5e7 steps) is a bench run (bench/READ
 uses a small network with a higher learning rate on the standing motion with the default absolute
 PD targets (action 0 = the standing pose). A fresh policy's mean action stands, but its exploration
 noise (std 1 in action units: random PD targets over the whole range) topples it within ~0.85 s;
-in 64,000 steps it learns to stay up longer and closer to the pose. Measured (seed 1, 8 summaries of
-8,000 steps): mean return 7.23 at the first summary and 9.37 over the last three (8.81..9.73),
-episode length 42.5 -> 47.8 decisions, r_r 0.076 -> 0.121. With the earlier map (action 0 = the
-middle of each range) the same run went 4.80 -> 5.56 with r_r ~0.03 throughout. Thresholds: the last
-three summaries' mean return beats the first by >= 1.5 (a summary's standard error is ~0.1: ~200
-episodes of std ~1.5 each), the mean episode length grows by >= 3 decisions and the last summary's
-r_r beats the first by >= 0.03.
+in 64,000 steps it learns to stay up longer and closer to the pose. With the earlier map (action 0 =
+the middle of each range) the seed-1 run went 4.80 -> 5.56 with r_r ~0.03 throughout.
+
+Measured over seeds (bench/learning_seeds.py --test mimic, bench/RESULTS.md 2026-11-28): the gain of
+the last three summaries over the first is +2.09..+2.37 in mean return (first summary 7.0..7.3),
++2.3..+5.4 decisions in episode length (first 41.6..43.4) and +0.052..+0.059 in r_r for seeds 1-3
+with the numpy initialisation; +2.05..+2.28, +3.1..+5.3 and +0.045..+0.056 for seeds 1-3 with
+torch's earlier one. Thresholds: the mean return gains >= 1.5 (a summary's standard error is
+~0.1, ~200 episodes of std ~1.5 each, so a policy that does not learn gains 0 +- ~0.15; every seed
+>= 2.05), the last r_r beats the first by >= 0.03 (every seed >= 0.045), and the episode length
+grows by >= 1.5 decisions (the noisiest of the three, +2.3..+5.4 over the seeds; the return and
+r_r gains are what a policy that does not learn cannot reach).
 """
 from __future__ import annotations
 
@@ -55,7 +60,7 @@ def test_mimic_stays_up_longer_after_64k_steps(tmp_path, env_no_proxy):
     assert reward[-1][0] == 64000 and len(reward) == 8
     last = sum(value for _, value in reward[-3:]) / 3
     assert last >= reward[0][1] + 1.5, reward
-    assert sum(length[-3:]) / 3 >= length[0] + 3.0, length
+    assert sum(length[-3:]) / 3 >= length[0] + 1.5, length
     pose = [e.value for e in acc.Scalars("Mimic/r_r")]
     assert len(pose) == 8 and pose[-1] >= pose[0] + 0.03, pose
     assert (tmp_path / "results" / "m" / "Mimic.onnx").exists()

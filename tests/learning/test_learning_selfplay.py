@@ -5,15 +5,23 @@ MA-POCA, each team one agent group): our trainer, the stub as a separate process
 configs/soccer.yaml cut to 60,000 steps. Two numbers a user would look at:
 
 * ``Self-play/ELO`` in TensorBoard (the learning policy's rating against its own snapshots,
-  initial_elo 1200, ML-Agents' update without a K factor: at most 1 point per game). Measured at
-  the first and the last summary: seed 1 1198.6 -> 1234.5, seed 2 1198.1 -> 1239.7 (and about 1320
-  after the full 200k steps, bench/RESULTS.md).
+  initial_elo 1200, ML-Agents' update without a K factor: at most 1 point per game).
 * The exported ONNX (deterministic) against a player choosing uniformly at random, on the task
-  itself (``soccer.play_match``, 16 pitches, 1,000 decisions): measured 379 goals for, 0 against
-  (seed 1) and 385 : 1 (seed 2); random against random scores about evenly (17 : 16 in 400).
+  itself (``soccer.play_match``, 16 pitches, 1,000 decisions, goals for : against).
 
-Thresholds: ELO at the last summary >= 1215 (+15), and the trained policy scores at least 5
-times as many goals as it concedes against the random player, with >= 100 goals.
+Measured over seeds (bench/learning_seeds.py --test soccer, bench/RESULTS.md 2026-11-28), ELO at
+10k -> 60k and the match: seeds 1, 2, 3 with the numpy initialisation 1199.0 -> 1207.6 (100 : 36),
+1202.5 -> 1208.3 (100 : 38), 1199.8 -> 1244.8 (462 : 1); with torch's earlier one 1198.6 -> 1234.5
+(379 : 0), 1198.1 -> 1239.7 (385 : 1), 1199.7 -> 1248.3 (323 : 30). At 60k some seeds have only
+begun to learn (about 1320 after the full 200k steps, bench/RESULTS.md). An untrained policy (the
+ONNX of a run stopped before its first update, seeds 1-3) scores 8 : 54, 34 : 42, 32 : 34 against
+the random player, random against random 37 : 52.
+
+Thresholds: against the random player >= 70 goals and at least twice as many as conceded (every
+trained seed >= 100 and 2.6x; no untrained policy scored more than it conceded, nor over 34), and
+ELO at the last summary >= 1204 (every seed >= 1207.6). The ELO check alone is weak: a rating
+that does not learn drifts by several points by 60k (the 10k summaries already lie 1198.1..1202.5),
+so the match is the proof that the policy learned.
 """
 from __future__ import annotations
 
@@ -65,13 +73,13 @@ def test_soccer_selfplay_elo_rises_and_the_policy_beats_a_random_player(tmp_path
     elo = [(e.step, e.value) for e in acc.Scalars("Self-play/ELO")]
     assert elo[-1][0] == STEPS
     assert abs(elo[0][1] - 1200) < 5, elo  # it starts at initial_elo...
-    assert elo[-1][1] >= 1215, elo  # ...and the learner keeps beating its snapshots
+    assert elo[-1][1] >= 1204, elo  # ...and the learner keeps beating its snapshots
 
     baseline = play_match(make_task("soccer", num_areas=16, seed=5), random_player(1), random_player(2), 400)
     assert baseline[0] < 3 * max(baseline[1], 1) and baseline[1] < 3 * max(baseline[0], 1), baseline
     wins, losses, _ = play_match(make_task("soccer", num_areas=16, seed=5),
                                  onnx_player(tmp_path / "results" / "s" / "Soccer.onnx"), random_player(2), 1000)
-    assert wins >= 100 and wins >= 5 * losses, (wins, losses, baseline)
+    assert wins >= 70 and wins >= 2 * losses, (wins, losses, baseline)
 
 
 TWOS_STEPS = 100000
