@@ -6,7 +6,8 @@ that no seed passes by luck or fails by an unlucky draw (bench/RESULTS.md).
     PYTHONPATH=$PWD .venv/bin/python bench/learning_seeds.py --test ball3d --seeds 1 2 3 [--out bench/out]
 
 Tests: ball3d (PPO, tests/learning/test_learning.py), bc (tests/learning/test_learning_demo.py),
-mimic (tests/learning/test_learning_mimic.py), soccer (the 1 v 1, tests/learning/test_learning_selfplay.py).
+mimic (tests/learning/test_learning_mimic.py), soccer (the 1 v 1, tests/learning/test_learning_selfplay.py);
+soccer_untrained: the soccer test's match for a policy that never updated (what the threshold must exclude).
 Prints one JSON line per seed and appends them to <out>/learning_seeds.jsonl.
 """
 from __future__ import annotations
@@ -69,7 +70,25 @@ def soccer(tmp: pathlib.Path, seed: int) -> dict:
     return {"elo_first": elo[0], "elo_last": elo[-1], "wins": int(wins), "losses": int(losses)}
 
 
-TESTS = {"ball3d": ball3d, "bc": bc, "mimic": mimic, "soccer": soccer}
+def soccer_untrained(tmp: pathlib.Path, seed: int) -> dict:
+    """What the soccer test's match gives a policy that never updated: configs/soccer.yaml with
+    max_steps 1,000 (below buffer_size 2,048), its ONNX against the random player."""
+    from tests.integration.conftest import ROOT, train_on_stub
+    from tests.learning.test_learning_selfplay import onnx_player, random_player
+    from unity_stub_env.tasks import make_task
+    from unity_stub_env.tasks.soccer import play_match
+
+    cfg = tmp / "soccer.yaml"
+    cfg.write_text((ROOT / "configs" / "soccer.yaml").read_text().replace("max_steps: 200000", "max_steps: 1000"))
+    train_on_stub(tmp, cfg, "soccer", "Soccer", _env(), num_areas=16, seed=seed, run_id="s")
+    wins, losses, _ = play_match(make_task("soccer", num_areas=16, seed=5),
+                                 onnx_player(tmp / "results" / "s" / "Soccer.onnx"), random_player(2), 1000)
+    random_wins, random_losses, _ = play_match(make_task("soccer", num_areas=16, seed=5), random_player(1),
+                                               random_player(2), 1000)
+    return {"wins": int(wins), "losses": int(losses), "random_vs_random": [int(random_wins), int(random_losses)]}
+
+
+TESTS = {"ball3d": ball3d, "bc": bc, "mimic": mimic, "soccer": soccer, "soccer_untrained": soccer_untrained}
 
 
 def main() -> None:
