@@ -10,8 +10,8 @@ in 64,000 steps it learns to stay up longer and closer to the pose. With the ear
 the middle of each range) the seed-1 run went 4.80 -> 5.56 with r_r ~0.03 throughout.
 
 Measured over seeds (bench/learning_seeds.py --test mimic, bench/RESULTS.md 2026-11-28): the gain of
-the last three summaries over the first is +2.09..+2.37 in mean return (first summary 7.0..7.3),
-+2.3..+5.4 decisions in episode length (first 41.6..43.4) and +0.052..+0.059 in r_r for seeds 1-3
+the last three summaries over the first is +2.09..+2.47 in mean return (first summary 7.0..7.3),
++2.3..+5.4 decisions in episode length (first 41.6..43.4) and +0.050..+0.062 in r_r for seeds 1-5
 with the numpy initialisation; +2.05..+2.28, +3.1..+5.3 and +0.045..+0.056 for seeds 1-3 with
 torch's earlier one. Thresholds: the mean return gains >= 1.5 (a summary's standard error is
 ~0.1, ~200 episodes of std ~1.5 each, so a policy that does not learn gains 0 +- ~0.15; every seed
