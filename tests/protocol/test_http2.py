@@ -156,6 +156,36 @@ def test_pings_are_acknowledged_and_settings_acked():
         transport.close(grace=0.2)
 
 
+def test_close_on_another_thread_ends_a_take_waiting_there():
+    """close() while take() waits on another thread (as a fixture's teardown does beside a
+    serving thread): the waiting take returns None at once instead of after its 60 s, and its
+    read round is not pulled from under it (before: BufferError from the receive buffer's
+    release, EBADF from the closed selector, or a select left waiting on a closed epoll)."""
+    transport = http2_server.Http2Transport("127.0.0.1", free_port(), EXCHANGE_PATH, 1 << 20)
+    transport.start()
+    outcome: dict = {}
+    waiting = threading.Event()
+
+    def serve():
+        waiting.set()
+        try:
+            outcome["call"] = transport.take(60.0)
+        except BaseException as error:  # noqa: BLE001 - the test reports any
+            outcome["error"] = error
+
+    with socket.create_connection(("127.0.0.1", transport.port), timeout=5) as sock:
+        sock.sendall(http2.PREFACE + http2.frame(http2.SETTINGS, 0, 0))
+        thread = threading.Thread(target=serve, daemon=True)
+        thread.start()
+        waiting.wait(5)
+        for _ in range(20):  # PINGs: the waiting take has reads to do while close() comes
+            sock.sendall(http2.frame(http2.PING, 0, 0, b"12345678"))
+        transport.close(grace=0.2)
+        thread.join(30)
+    assert not thread.is_alive(), "take() kept waiting after close()"
+    assert outcome == {"call": None}
+
+
 @pytest.mark.parametrize("server_transport", ["http2", "grpcio"])
 def test_garbled_message_is_a_protocol_error_and_the_client_is_told(server_transport):
     port = free_port()

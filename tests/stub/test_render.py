@@ -171,6 +171,45 @@ def test_bad_input_exits_2(tmp_path, args, words):
     assert words in run.stderr and "Traceback" not in run.stderr
 
 
+def test_an_mp4_whose_ffmpeg_fails_is_an_error_with_its_reason_and_leaves_no_clip(tmp_path):
+    """ffmpeg writing to a full disk (/dev/full behind the partial file's name): a RenderError that
+    carries ffmpeg's exit status and message, instead of a BrokenPipeError with no reason or a
+    truncated clip published as complete; and no clip, partial or not, is left."""
+    from unity_stub_env.render import RenderError
+    from unity_stub_env.render.video import VideoWriter
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full here")
+    writer = VideoWriter(str(tmp_path / "clip.mp4"), 30.0)
+    os.symlink("/dev/full", writer.partial)
+    frame = np.zeros((72, 96, 3), np.uint8)
+    with pytest.raises(RenderError) as error:
+        try:
+            for _ in range(300):
+                writer.append(frame)
+        finally:
+            writer.close()
+    assert "clip.mp4" in str(error.value) and "No space left on device" in str(error.value)
+    assert "exit status" in str(error.value)
+    assert os.listdir(tmp_path) == []
+
+
+def test_an_mp4_cut_short_by_a_killed_ffmpeg_is_an_error_not_a_clip(tmp_path):
+    from unity_stub_env.render import RenderError
+    from unity_stub_env.render.video import VideoWriter
+
+    writer = VideoWriter(str(tmp_path / "clip.mp4"), 30.0)
+    frame = np.zeros((72, 96, 3), np.uint8)
+    writer.append(frame)
+    writer.process.kill()
+    writer.process.wait()
+    with pytest.raises(RenderError, match="exit status -9 after"):
+        for _ in range(300):  # a pipe's buffer takes a few frames before the write breaks
+            writer.append(frame)
+    writer.close()  # as a caller's finally does: nothing more to publish
+    assert os.listdir(tmp_path) == []
+
+
 def test_evaluate_video_films_each_scripted_dodge_throw(tmp_path):
     """One clip per scripted throw, named by number, start side and mark; each shows its throw
     from launch to the end of the episode (a hit or a pass within ~1.5 s)."""

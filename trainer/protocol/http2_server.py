@@ -39,6 +39,7 @@ import select
 import selectors
 import socket
 import struct
+import threading
 import time
 from urllib.parse import quote
 
@@ -613,6 +614,13 @@ class Http2Transport:
         # second client on the port cannot inject steps into the session (docs/protocol.md, "Malformed HTTP/2")
         self.session: _Connection | None = None
         self._next_sweep = 0.0
+        # take() may wait on one thread while close() runs on another (a thread serving the
+        # simulator, stopped from outside): close() must not free the receive buffer, the selector
+        # or a socket under a read in progress (a BufferError, or EBADF from a closed epoll). Each
+        # read round holds this lock; close() wakes the round's select through _wake and then
+        # takes the lock, so it waits for that round only, never for the rest of take()'s timeout.
+        self._lock = threading.Lock()
+        self._wake: tuple[socket.socket, socket.socket] | None = None
 
     def start(self) -> None:
         family = socket.AF_INET6 if ":" in self.bind else socket.AF_INET
@@ -628,6 +636,9 @@ class Http2Transport:
         self.port = listener.getsockname()[1]
         self._listener = listener
         self._selector.register(listener, selectors.EVENT_READ)
+        self._wake = socket.socketpair()
+        self._wake[0].setblocking(False)
+        self._selector.register(self._wake[0], selectors.EVENT_READ)
 
     # callbacks from connections
     def call_dropped(self, call: IncomingCall, why: str) -> None:
@@ -699,10 +710,18 @@ class Http2Transport:
 
     def _pump(self, timeout: float) -> bool:
         """One select round: accept, read, collect calls. False if nothing was ready."""
+        with self._lock:
+            if self.closed:
+                return False
+            return self._pump_locked(timeout)
+
+    def _pump_locked(self, timeout: float) -> bool:
         if self._connections:
             self._sweep()
         events = self._selector.select(timeout)
         for key, _ in events:
+            if self._wake is not None and key.fileobj is self._wake[0]:
+                continue  # close() on another thread: the caller sees `closed` next
             if key.fileobj is self._listener:
                 self._accept()
             else:
@@ -768,6 +787,12 @@ class Http2Transport:
         if self.closed:
             return
         self.closed = True
+        if self._wake is not None:
+            self._wake[1].send(b"\0")  # ends a select that another thread's take() is in
+        with self._lock:
+            self._close_locked(grace)
+
+    def _close_locked(self, grace: float) -> None:
         if self._listener is not None:
             self._selector.unregister(self._listener)
             self._listener.close()
@@ -777,5 +802,9 @@ class Http2Transport:
         self._connections.clear()
         self._ready.clear()
         self._selector.close()
+        if self._wake is not None:
+            for end in self._wake:
+                end.close()
+            self._wake = None
         self.session = None  # (connection <-> transport: no cycle left through it)
         self.reader.release()
