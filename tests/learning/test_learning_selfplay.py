@@ -10,8 +10,9 @@ configs/soccer.yaml cut to 60,000 steps. Two numbers a user would look at:
   itself (``soccer.play_match``, 16 pitches, 1,000 decisions, goals for : against).
 
 Measured over seeds (bench/learning_seeds.py --test soccer, bench/RESULTS.md 2026-11-28), ELO at
-10k -> 60k and the match: seeds 1, 2, 3 with the numpy initialisation 1199.0 -> 1207.6 (100 : 36),
-1202.5 -> 1208.3 (100 : 38), 1199.8 -> 1244.8 (462 : 1); with torch's earlier one 1198.6 -> 1234.5
+10k -> 60k and the match: seeds 1-5 with the numpy initialisation 1199.0 -> 1207.6 (100 : 36),
+1202.5 -> 1208.3 (100 : 38), 1199.8 -> 1244.8 (462 : 1), 1200.1 -> 1222.0 (182 : 13), 1199.3 -> 1211.7
+(218 : 34); with torch's earlier one 1198.6 -> 1234.5
 (379 : 0), 1198.1 -> 1239.2 (378 : 4), 1199.7 -> 1248.3 (323 : 30). At 60k some seeds have only
 begun to learn (about 1320 after the full 200k steps, bench/RESULTS.md). An untrained policy (the
 ONNX of a run stopped before its first update, seeds 1-3, bench/learning_seeds.py --test
