@@ -54,6 +54,9 @@ class ObservationSpec(NamedTuple):
     name: str
 
 
+_FLOAT32, _INT32 = np.dtype(np.float32), np.dtype(np.int32)  # compared with a dtype: no conversion per call
+
+
 class ActionTuple:
     """Actions of n agents: ``continuous`` float32 [n, c] and ``discrete`` int32 [n, b].
 
@@ -64,12 +67,22 @@ class ActionTuple:
     discrete_dtype = np.int32
 
     def __init__(self, continuous: np.ndarray | None = None, discrete: np.ndarray | None = None) -> None:
-        self._continuous: np.ndarray | None = None
-        self._discrete: np.ndarray | None = None
+        # the trainer builds two per decision step, both parts given: no [n, 0] placeholder made
+        # only to be replaced, no method calls (add_continuous / add_discrete do the same)
         if continuous is not None:
-            self.add_continuous(continuous)
+            continuous = np.asarray(continuous)
+            if continuous.dtype != _FLOAT32:
+                continuous = continuous.astype(np.float32)
         if discrete is not None:
-            self.add_discrete(discrete)
+            discrete = np.asarray(discrete)
+            if discrete.dtype != _INT32:
+                discrete = discrete.astype(np.int32)
+            if continuous is None:
+                continuous = np.zeros((len(discrete), 0), dtype=np.float32)
+        elif continuous is not None:
+            discrete = np.zeros((len(continuous), 0), dtype=np.int32)
+        self._continuous: np.ndarray | None = continuous
+        self._discrete: np.ndarray | None = discrete
 
     @property
     def continuous(self) -> np.ndarray | None:
@@ -81,7 +94,7 @@ class ActionTuple:
 
     def add_continuous(self, continuous: np.ndarray) -> None:
         continuous = np.asarray(continuous)
-        if continuous.dtype != np.float32:
+        if continuous.dtype != _FLOAT32:
             continuous = continuous.astype(np.float32)
         if self._discrete is None:
             self._discrete = np.zeros((len(continuous), 0), dtype=np.int32)
@@ -89,7 +102,7 @@ class ActionTuple:
 
     def add_discrete(self, discrete: np.ndarray) -> None:
         discrete = np.asarray(discrete)
-        if discrete.dtype != np.int32:
+        if discrete.dtype != _INT32:
             discrete = discrete.astype(np.int32)
         if self._continuous is None:
             self._continuous = np.zeros((len(discrete), 0), dtype=np.float32)

@@ -111,13 +111,17 @@ class RunState:
     updated: bool = False  # the first update was made (likewise)
 
     # ------------------------------------------------------------------ behaviors
-    def ensure_runner(self, behavior_name: str, agents: int | None = None) -> BehaviorRunner:
-        """The behavior's runner, created at its first contact; ``agents`` (its agents in one
-        simulator, then) converts a 0.x file's step counts (RunOptions.behavior_settings)."""
+    def ensure_runner(self, behavior_name: str, first_contact: tuple[DecisionSteps, TerminalSteps] | None = None
+                      ) -> BehaviorRunner:
+        """The behavior's runner, created at its first contact; the agents of ``first_contact`` (one
+        simulator's steps of it, then) convert a 0.x file's step counts (RunOptions.behavior_settings).
+        Counted only for a new runner: this runs every step, for one agent as often as not."""
         brain, _team = brain_name_of(behavior_name)
         runner = self.runners.get(brain)
         if runner is not None:
             return runner
+        agents = None if first_contact is None else len(np.union1d(first_contact[0].agent_id,
+                                                                    first_contact[1].agent_id))
         spec = self.pool.behavior_specs()[behavior_name]  # merged over the workers: only for a new brain
         from trainer.behavior import BehaviorRunner
 
@@ -179,8 +183,7 @@ class RunState:
             for behavior in res.steps:
                 by_behavior.setdefault(behavior, []).append(env_id)
         for behavior, env_ids in by_behavior.items():
-            first = results[env_ids[0]].steps[behavior]
-            runner = self.ensure_runner(behavior, len(np.union1d(first[0].agent_id, first[1].agent_id)))
+            runner = self.ensure_runner(behavior, results[env_ids[0]].steps[behavior])
             policy = runner.policy_for(brain_name_of(behavior)[1])  # self-play: maybe a snapshot
             # each env's deciding agents are the rows [start, end) of the one batched forward pass
             steps, start = [], 0
