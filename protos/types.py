@@ -57,6 +57,12 @@ class ObservationSpec(NamedTuple):
 _FLOAT32, _INT32 = np.dtype(np.float32), np.dtype(np.int32)  # compared with a dtype: no conversion per call
 
 
+def _as(values, dtype: np.dtype) -> np.ndarray:
+    """``values`` as an array of ``dtype``, converted only when it is another."""
+    values = np.asarray(values)
+    return values if values.dtype == dtype else values.astype(dtype)
+
+
 class ActionTuple:
     """Actions of n agents: ``continuous`` float32 [n, c] and ``discrete`` int32 [n, b].
 
@@ -68,21 +74,13 @@ class ActionTuple:
 
     def __init__(self, continuous: np.ndarray | None = None, discrete: np.ndarray | None = None) -> None:
         # the trainer builds two per decision step, both parts given: no [n, 0] placeholder made
-        # only to be replaced, no method calls (add_continuous / add_discrete do the same)
-        if continuous is not None:
-            continuous = np.asarray(continuous)
-            if continuous.dtype != _FLOAT32:
-                continuous = continuous.astype(np.float32)
-        if discrete is not None:
-            discrete = np.asarray(discrete)
-            if discrete.dtype != _INT32:
-                discrete = discrete.astype(np.int32)
-            if continuous is None:
-                continuous = np.zeros((len(discrete), 0), dtype=np.float32)
-        elif continuous is not None:
-            discrete = np.zeros((len(continuous), 0), dtype=np.int32)
-        self._continuous: np.ndarray | None = continuous
-        self._discrete: np.ndarray | None = discrete
+        # only to be replaced
+        self._continuous: np.ndarray | None = None if continuous is None else _as(continuous, _FLOAT32)
+        self._discrete: np.ndarray | None = None if discrete is None else _as(discrete, _INT32)
+        if self._continuous is None and self._discrete is not None:
+            self._continuous = np.zeros((len(self._discrete), 0), dtype=np.float32)
+        elif self._discrete is None and self._continuous is not None:
+            self._discrete = np.zeros((len(self._continuous), 0), dtype=np.int32)
 
     @property
     def continuous(self) -> np.ndarray | None:
@@ -93,20 +91,14 @@ class ActionTuple:
         return self._discrete
 
     def add_continuous(self, continuous: np.ndarray) -> None:
-        continuous = np.asarray(continuous)
-        if continuous.dtype != _FLOAT32:
-            continuous = continuous.astype(np.float32)
+        self._continuous = _as(continuous, _FLOAT32)
         if self._discrete is None:
-            self._discrete = np.zeros((len(continuous), 0), dtype=np.int32)
-        self._continuous = continuous
+            self._discrete = np.zeros((len(self._continuous), 0), dtype=np.int32)
 
     def add_discrete(self, discrete: np.ndarray) -> None:
-        discrete = np.asarray(discrete)
-        if discrete.dtype != _INT32:
-            discrete = discrete.astype(np.int32)
+        self._discrete = _as(discrete, _INT32)
         if self._continuous is None:
-            self._continuous = np.zeros((len(discrete), 0), dtype=np.float32)
-        self._discrete = discrete
+            self._continuous = np.zeros((len(self._discrete), 0), dtype=np.float32)
 
     def __repr__(self) -> str:
         return f"ActionTuple(continuous={self._continuous!r}, discrete={self._discrete!r})"
