@@ -100,7 +100,9 @@ class _GrpcioChannel:
         except self._grpc.RpcError as error:
             raise CallError(error.code().name, error.details() or "") from None
 
-    def close(self) -> None:
+    def close(self, abort: bool = False) -> None:
+        """``abort`` is Http2Channel's (a reset instead of a FIN); grpcio does not expose how its
+        connection closes, so here it closes the same way either way."""
         self._ready.cancel()
         self._channel.close()
 
@@ -254,10 +256,7 @@ class RpcCommunicator:
             if pace is not None and pace.spin_s > 0:
                 logger.info("--spin-wait-ms %g: %d of %d answers were found by polling, not by a wake-up",
                             pace.spin_s * 1e3, pace.caught_polling, pace.arrivals)
-            if abort and isinstance(self._channel, Http2Channel):
-                self._channel.close(abort=True)
-            else:
-                self._channel.close()
+            self._channel.close(abort=abort)
             self._channel = None
 
 
