@@ -586,6 +586,11 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
             state.ranks.close()
             if state.clips is not None:
                 state.clips.finish()
+    # Asked again after the final save and the simulators' exit: scancel and a preemption signal
+    # every process of the job in turn, so the simulator's TERM can close the connection before the
+    # trainer's own TERM arrives (seen in CI). Until the trainer exits, a stop signal still means
+    # "unfinished, resume me" (docs/cluster.md "Stop, preempt, resume").
+    stopped = stopped or STOP.requested is not None
     if stopped and not ck.inference and not state.finished:
         logger.info("Stopped before max_steps (exit status %d); continue this run with --resume.", EXIT_STOPPED)
         return EXIT_STOPPED

@@ -11,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -312,6 +313,38 @@ def test_a_second_signal_during_the_final_save_loses_nothing(tmp_path, basic_con
     assert code == EXIT_STOPPED, text
     assert "already stopping" in text
     _assert_final_save(tmp_path / "results" / "twice", 1000)
+
+
+def _children(pid: int) -> list[int]:
+    return [int(c) for t in Path(f"/proc/{pid}/task").iterdir()
+            for c in (t / "children").read_text().split()]
+
+
+def test_a_stop_signal_after_the_simulator_closed_still_means_unfinished(tmp_path, basic_config, env_no_proxy):
+    """scancel and a preemption signal every process of a job in turn: the simulator's TERM can
+    close the connection before the trainer's own TERM arrives, which then lands during the
+    final save. The run is still unfinished: exit 75 (resume me), not 0."""
+    proc = subprocess.Popen(_endless_basic(tmp_path, basic_config, "late"), cwd=tmp_path, env=env_no_proxy,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    try:
+        for line in proc.stdout:
+            lines.append(line)
+            if "Basic. Step: 1000." in line:
+                simulators = _children(proc.pid)
+                assert len(simulators) == 1, simulators
+                os.kill(simulators[0], signal.SIGTERM)
+            elif "The simulator closed the connection" in line:
+                proc.send_signal(signal.SIGTERM)
+                break
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    text = "".join(lines) + out
+    assert proc.returncode == EXIT_STOPPED, text
+    assert "continue this run with --resume" in text
+    _assert_final_save(tmp_path / "results" / "late", 1000)
 
 
 def test_sigterm_while_waiting_for_the_editor_stops_at_once(tmp_path, basic_config, env_no_proxy):
