@@ -134,3 +134,21 @@ def test_squashed_sample_gradients_equal_autograd():
     grad_mu, grad_ls = nd.squashed_sample_grads(raw, action, mu, log_sigma, noise, grad_action, k)
     np.testing.assert_allclose(grad_mu, mu_t.grad.numpy(), rtol=1e-4, atol=1e-5)
     np.testing.assert_allclose(grad_ls, ls_t.grad.numpy(), rtol=1e-4, atol=1e-5)
+
+
+def test_terms_computed_once_give_the_same_bits():
+    """``terms=`` and ``option_log_probs=`` (what acting caches and PPO's step shares) change no bit."""
+    actions, mu, log_sigma, logits, _, choice = arrays()
+    terms = nd.gaussian_terms(log_sigma)
+    grad = RNG.standard_normal((N, C)).astype(np.float32)
+    for constant in (False, True):
+        assert np.array_equal(nd.gaussian_log_prob(actions, mu, log_sigma, constant, terms=terms),
+                              nd.gaussian_log_prob(actions, mu, log_sigma, constant))
+    for shared, alone in zip(nd.gaussian_log_prob_grads(actions, mu, log_sigma, grad, terms),
+                             nd.gaussian_log_prob_grads(actions, mu, log_sigma, grad)):
+        assert np.array_equal(shared, alone)
+    assert np.array_equal(nd.gaussian_entropy_grad(log_sigma, terms), nd.gaussian_entropy_grad(log_sigma))
+    probs = nd.softmax(logits)
+    option_log_probs = nd.categorical_option_log_probs(probs)
+    assert np.array_equal(nd.categorical_entropy(probs, option_log_probs), nd.categorical_entropy(probs))
+    assert np.array_equal(nd.categorical_entropy_grad(probs, option_log_probs), nd.categorical_entropy_grad(probs))

@@ -18,6 +18,7 @@ Shapes: n = batch, c = continuous dimensions, k = options of one discrete branch
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -31,29 +32,49 @@ _LOG_2 = np.log(2.0)
 TWO_PI_E = 2 * math.pi * math.e
 _MAX, _SUM = np.maximum.reduce, np.add.reduce  # ndarray.max/sum without their Python wrappers
 
-__all__ = ["EPSILON", "MASKED_LOGIT_OFFSET", "gaussian_log_prob", "gaussian_log_prob_grads", "gaussian_entropy",
+__all__ = ["EPSILON", "MASKED_LOGIT_OFFSET", "GaussianTerms", "gaussian_terms", "gaussian_log_prob", "gaussian_log_prob_grads", "gaussian_entropy",
            "gaussian_entropy_grad", "tanh_log_abs_det_jacobian", "squashed_sample", "squashed_log_prob",
            "squashed_sample_grads", "mask_logits", "softmax", "categorical_log_prob", "categorical_log_prob_grad",
            "categorical_option_log_probs", "categorical_entropy", "categorical_entropy_grad", "combined_entropy"]
 
 
 # ---------------------------------------------------------------------------------- Gaussian
-def gaussian_log_prob(actions: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray,
-                      float64_constant: bool = False) -> np.ndarray:
-    """Per-dimension log N(a; mu, sigma). actions, mu [n, c]; log_sigma [1, c] or [n, c] -> [n, c]
-    (float64 with ``float64_constant``)."""
+class GaussianTerms(NamedTuple):
+    """What the Gaussian's log-prob and its gradients need of log_sigma alone, computed once by
+    ``gaussian_terms`` and passed as ``terms=`` where log_sigma is shared: acting caches them
+    while the parameters do not change (numpy_net.NumpyActor.gaussian), PPO's minibatch step
+    computes them once for its log-probs, their gradients and the entropy's gradient. The same
+    expressions as computed inline, so the numbers are the same with or without."""
+
+    sigma: np.ndarray  # exp(log_sigma)
+    denom: np.ndarray  # 2 sigma^2 + EPSILON
+    log_term: np.ndarray  # log(sigma + EPSILON)
+
+
+def gaussian_terms(log_sigma: np.ndarray) -> GaussianTerms:
+    """``GaussianTerms`` of log_sigma ([1, c] or [n, c], each term the same shape)."""
     sigma = np.exp(log_sigma)
+    return GaussianTerms(sigma, 2 * sigma**2 + EPSILON, np.log(sigma + EPSILON))
+
+
+def gaussian_log_prob(actions: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray,
+                      float64_constant: bool = False, terms: GaussianTerms | None = None) -> np.ndarray:
+    """Per-dimension log N(a; mu, sigma). actions, mu [n, c]; log_sigma [1, c] or [n, c] -> [n, c]
+    (float64 with ``float64_constant``); ``terms``: ``gaussian_terms(log_sigma)`` if at hand."""
+    if terms is None:
+        terms = gaussian_terms(log_sigma)
     constant = _LOG_SQRT_2PI_FLOAT64 if float64_constant else LOG_SQRT_2PI
-    return -((actions - mu) ** 2) / (2 * sigma**2 + EPSILON) - np.log(sigma + EPSILON) - constant
+    return -((actions - mu) ** 2) / terms.denom - terms.log_term - constant
 
 
-def gaussian_log_prob_grads(actions: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray, grad: np.ndarray
-                            ) -> tuple[np.ndarray, np.ndarray]:
+def gaussian_log_prob_grads(actions: np.ndarray, mu: np.ndarray, log_sigma: np.ndarray, grad: np.ndarray,
+                            terms: GaussianTerms | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``grad`` [n, c] (d loss / d log-prob) taken back through ``gaussian_log_prob``: (d loss / d mu
     [n, c], d loss / d log_sigma per element [n, c]; sum it over rows for a shared log_sigma)."""
-    sigma = np.exp(log_sigma)
+    if terms is None:
+        terms = gaussian_terms(log_sigma)
+    sigma, denom = terms.sigma, terms.denom
     diff = actions - mu
-    denom = 2 * sigma ** 2 + EPSILON
     grad_mu = grad * 2.0 * diff / denom
     grad_log_sigma = grad * (diff ** 2 * 4.0 * sigma ** 2 / denom ** 2 - sigma / (sigma + EPSILON))
     return grad_mu, grad_log_sigma
@@ -64,9 +85,9 @@ def gaussian_entropy(log_sigma: np.ndarray) -> np.ndarray:
     return 0.5 * np.log(TWO_PI_E * np.exp(log_sigma) ** 2 + EPSILON)
 
 
-def gaussian_entropy_grad(log_sigma: np.ndarray) -> np.ndarray:
+def gaussian_entropy_grad(log_sigma: np.ndarray, terms: GaussianTerms | None = None) -> np.ndarray:
     """d gaussian_entropy / d log_sigma, per element. [.., c] -> [.., c]."""
-    sigma = np.exp(log_sigma)
+    sigma = np.exp(log_sigma) if terms is None else terms.sigma
     return TWO_PI_E * sigma ** 2 / (TWO_PI_E * sigma ** 2 + EPSILON)
 
 
@@ -136,15 +157,20 @@ def categorical_option_log_probs(probs: np.ndarray) -> np.ndarray:
     return np.log(probs + EPSILON)
 
 
-def categorical_entropy(probs: np.ndarray) -> np.ndarray:
-    """-sum_k p log(p + EPSILON). probs [n, k] -> [n]."""
-    return -np.sum(probs * np.log(probs + EPSILON), axis=1)
+def categorical_entropy(probs: np.ndarray, option_log_probs: np.ndarray | None = None) -> np.ndarray:
+    """-sum_k p log(p + EPSILON). probs [n, k] -> [n]; ``option_log_probs``:
+    ``categorical_option_log_probs(probs)`` if at hand (PPO's step shares it with the gradient)."""
+    if option_log_probs is None:
+        option_log_probs = categorical_option_log_probs(probs)
+    return -np.sum(probs * option_log_probs, axis=1)
 
 
-def categorical_entropy_grad(probs: np.ndarray) -> np.ndarray:
+def categorical_entropy_grad(probs: np.ndarray, option_log_probs: np.ndarray | None = None) -> np.ndarray:
     """d categorical_entropy(softmax(logits)) / d logits. probs [n, k] -> [n, k]."""
+    if option_log_probs is None:
+        option_log_probs = categorical_option_log_probs(probs)
     # d/dp_j of -sum p log(p + eps) = -log(p_j + eps) - p_j / (p_j + eps), then through the softmax
-    d_entropy = -np.log(probs + EPSILON) - probs / (probs + EPSILON)
+    d_entropy = -option_log_probs - probs / (probs + EPSILON)
     return probs * (d_entropy - np.sum(probs * d_entropy, axis=1, keepdims=True))
 
 

@@ -254,9 +254,10 @@ class NumpyCritic(_NumpyModule):
 
 
 def _gaussian_terms(log_sigma: np.ndarray) -> tuple:
-    """What acting needs of log_sigma [1, c] besides the log-prob: sigma (to scale the noise) and
-    the entropy per dimension [1, c]."""
-    return np.exp(log_sigma), numpy_distributions.gaussian_entropy(log_sigma)
+    """What acting needs of log_sigma [1, c]: sigma (to scale the noise), the entropy per dimension
+    [1, c], and the log-prob's numpy_distributions.GaussianTerms (sigma among them)."""
+    terms = numpy_distributions.gaussian_terms(log_sigma)
+    return terms.sigma, numpy_distributions.gaussian_entropy(log_sigma), terms
 
 
 class NumpyActor(_NumpyModule):

@@ -116,9 +116,9 @@ class NumpyPolicy:
         log_parts: list[np.ndarray] = []
         gaussian_entropy = None
         if mu is not None:
-            sigma, gaussian_entropy = self.actor.gaussian()
+            sigma, gaussian_entropy, terms = self.actor.gaussian()  # cached while log_sigma is unchanged
             raw = mu if deterministic else mu + self.noise.standard_normal(mu.shape, dtype=np.float32) * sigma
-            log_parts.append(nd.gaussian_log_prob(raw, mu, self.actor.log_sigma, float64_constant=True))
+            log_parts.append(nd.gaussian_log_prob(raw, mu, self.actor.log_sigma, float64_constant=True, terms=terms))
             raw = raw.astype(np.float32, copy=False)
             env_continuous = np.minimum(np.maximum(raw, -CONTINUOUS_CLIP), CONTINUOUS_CLIP) / CONTINUOUS_CLIP
         else:

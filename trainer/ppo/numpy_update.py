@@ -194,10 +194,11 @@ class NumpyPPO:
             w_mu, b_mu = self.actor.mu  # W^T, b
             mu = h @ w_mu + b_mu
             log_sigma = self.actor.log_sigma  # [1, c]
+            terms = nd.gaussian_terms(log_sigma)  # once for the log-probs and both gradients
             actions = batch["continuous_actions"]
-            logp_parts.append(nd.gaussian_log_prob(actions, mu, log_sigma))
+            logp_parts.append(nd.gaussian_log_prob(actions, mu, log_sigma, terms=terms))
             ent = ent + np.mean(nd.gaussian_entropy(log_sigma))
-            back.append(("gaussian", actions, mu, log_sigma))
+            back.append(("gaussian", actions, mu, log_sigma, terms))
         allowed = batch.get("allowed")
         offsets = self.actor.offsets
         for index, (weight, bias) in enumerate(self.actor.branches):
@@ -209,8 +210,9 @@ class NumpyPPO:
             probs = nd.softmax(logits)
             action = batch["discrete_actions"][:, index]
             logp_parts.append(nd.categorical_log_prob(probs, action)[:, None])
-            ent = ent + nd.categorical_entropy(probs)
-            back.append(("categorical", index, probs, action, a))
+            option_log_probs = nd.categorical_option_log_probs(probs)  # for the entropy and its gradient
+            ent = ent + nd.categorical_entropy(probs, option_log_probs)
+            back.append(("categorical", index, probs, action, a, option_log_probs))
         log_probs = np.concatenate(logp_parts, axis=1)
         # ---- policy term
         advantages = batch["advantages"][:, None]
@@ -224,24 +226,24 @@ class NumpyPPO:
         column = 0
         for item in back:
             if item[0] == "gaussian":
-                _, actions, mu, log_sigma = item
+                _, actions, mu, log_sigma, terms = item
                 c = actions.shape[1]
                 g = grad_logp[:, column:column + c]
                 column += c
-                grad_mu, grad_ls = nd.gaussian_log_prob_grads(actions, mu, log_sigma, g)
+                grad_mu, grad_ls = nd.gaussian_log_prob_grads(actions, mu, log_sigma, g, terms)
                 grad_ls = np.sum(grad_ls, axis=0, keepdims=True)  # one log_sigma for all rows
-                grad_ls += -beta / c * nd.gaussian_entropy_grad(log_sigma)
+                grad_ls += -beta / c * nd.gaussian_entropy_grad(log_sigma, terms)
                 w_mu, _ = self.actor.mu
                 grads[id(actor.mu.weight)] = (h.T @ grad_mu).T  # W^T contiguous, as stored
                 grads[id(actor.mu.bias)] = grad_mu.sum(axis=0)
                 grads[id(actor.log_sigma)] = grad_ls
                 grad_h += grad_mu @ w_mu.T
             else:
-                _, index, probs, action, a = item
+                _, index, probs, action, a, option_log_probs = item
                 g = grad_logp[:, column]
                 column += 1
                 grad_logits = nd.categorical_log_prob_grad(probs, action, g)
-                grad_logits += (-beta / n) * nd.categorical_entropy_grad(probs)
+                grad_logits += (-beta / n) * nd.categorical_entropy_grad(probs, option_log_probs)
                 if a is not None:
                     grad_logits = grad_logits * a
                 weight, _ = self.actor.branches[index]
