@@ -118,9 +118,17 @@ def main(argv: list[str] | None = None) -> int:
             from trainer.capture import capture_spec
 
             return capture_spec(options, env_vars)
-        from trainer.run import run_training
+        # the simulators launch before the loop's modules are imported (torch among them, in the
+        # background): they boot meanwhile (docs/performance.md, "Start-up and exit")
+        from trainer.run_setup import launch_simulators
 
-        return run_training(options, env_vars)
+        launched = launch_simulators(options, env_vars)
+        try:
+            from trainer.run import run_training
+        except BaseException:
+            launched.pool.close()
+            raise
+        return run_training(options, env_vars, launched)
     except (UserError, ProtocolError) as err:
         if debug:
             logger.exception("error")
