@@ -20,10 +20,6 @@ way the longest stop measured 0.09-0.13 s. ``import torch`` then finds the libra
 Without the GIL, though, the load does not stop an exit either: a process that left by
 interpreter finalization during it (an uncaught exception in the first second) ran libtorch's
 static destructors while its constructors still ran, and aborted. So an exit waits for the load.
-
-On Linux the thread runs at a lower priority (nice 10, this thread only): on a small machine the
-simulator's boot and the main thread's handshake are the critical path, and without the GIL the
-library load is a third runnable thread beside them on two cores.
 """
 from __future__ import annotations
 
@@ -32,7 +28,6 @@ import ctypes
 import importlib
 import importlib.util
 import os
-import sys
 import threading
 
 # in the order the run needs them: torch and the networks for the first action, then the exporter
@@ -68,21 +63,11 @@ def load_torch_libraries() -> None:
         return
 
 
-def lower_this_threads_priority() -> None:
-    """nice 10 for the calling thread alone (Linux: a thread id is a PRIO_PROCESS target)."""
-    if sys.platform.startswith("linux"):
-        try:
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
-        except OSError:
-            pass
-
-
 def start(modules: tuple[str, ...] = MODULES) -> threading.Thread:
     """Import ``modules`` one after another in a daemon thread (errors are left to the main
     thread's own import of the same module)."""
 
     def run() -> None:
-        lower_this_threads_priority()
         if "torch" in modules:
             with _loading_libraries:
                 load_torch_libraries()
