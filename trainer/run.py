@@ -465,9 +465,9 @@ def run_training(options, env_vars: EnvVars | None = None, launched: Launched | 
     env = options.env_settings
     main = env_vars.ranks.rank == 0  # data-parallel ranks: rank 0 alone writes files (trainer/distributed.py)
     state: RunState | None = None
-    # the simulators boot from here on; meanwhile torch, the networks and the ONNX exporter are
-    # imported in the background, and this thread sets up the results folder's files and answers
-    # the handshake and the first RESET before it needs torch (docs/performance.md, "Start-up and exit")
+    # the simulators boot from here on, while this thread sets up the results folder's files; it
+    # answers the handshake and the first RESET before it needs torch (docs/performance.md,
+    # "Start-up and exit")
     pool, run_dir = launched or launch_simulators(options, env_vars)
     try:
         status_path = os.path.join(run_dir, "run_logs", "training_status.json")
@@ -497,6 +497,10 @@ def run_training(options, env_vars: EnvVars | None = None, launched: Launched | 
     for line in params.describe():
         logger.info(line)
     stopped = write_failed = False
+    # torch, the networks and the exporter are imported in the background from here on, while this
+    # thread waits for the handshake: started earlier, the import would share the CPUs with the
+    # simulator's boot and this thread's set-up above, both of which the first step waits for
+    warmup.start()
     try:
         STOP.check()
         pool.connect()

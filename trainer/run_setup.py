@@ -12,7 +12,6 @@ import logging
 import os
 from typing import NamedTuple
 
-from trainer import warmup
 from trainer.artifacts.behaviors import BehaviorRecorder
 from trainer.config.env_vars import EnvVars
 from trainer.distributed import check_split
@@ -32,9 +31,9 @@ class Launched(NamedTuple):
 
 def launch_simulators(options, env_vars: EnvVars) -> Launched:
     """The last checks that need no simulator, the results folder, then listen and launch every
-    simulator and start importing torch, the networks and the exporter in the background
-    (trainer/warmup.py). From here on the simulators boot while the trainer imports and sets up
-    the rest (docs/performance.md, "Start-up and exit"). The caller closes the pool."""
+    simulator: from here on they boot while the trainer imports and sets up the rest, and
+    ``run_training`` starts the background import of torch (docs/performance.md, "Start-up and
+    exit"). The caller closes the pool."""
     env = options.env_settings
     # resolves --env first: a wrong path must not leave a results folder that blocks the rerun
     pool = EnvPool(pool_settings_of(options, env_vars))
@@ -46,7 +45,6 @@ def launch_simulators(options, env_vars: EnvVars) -> Launched:
     warn_if_not_loopback(env.bind, str(DEFAULT_EDITOR_PORT) if env.env_path is None else
                          f"{env.base_port}" + (f"-{env.base_port + env.num_envs - 1}" if env.num_envs > 1 else ""))
     pool.launch()
-    warmup.start()
     return Launched(pool, run_dir)
 
 
