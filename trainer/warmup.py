@@ -1,10 +1,11 @@
-"""The heavy imports, in a background thread started as soon as the simulators are launched.
+"""The heavy imports, in a background thread started once the simulators are launched and the
+main thread begins to wait for their handshake (trainer/run.py).
 
 Importing torch takes seconds on a small machine, longer than the stub (0.3 s) or a small Unity
 build takes to boot and connect. Imported in the main thread before the handshake, it made the
 simulator wait for the trainer (docs/performance.md, "Start-up and exit"). Imported here, it overlaps
-with the simulator's boot, the handshake, the first RESET and the results folder's set-up, which
-the main thread does meanwhile (waiting on sockets mostly, which releases the GIL). The main
+with the rest of the simulator's boot, the handshake and the first RESET, which the main thread
+does meanwhile (waiting on sockets mostly, which releases the GIL). The main
 thread then simply imports what it needs: Python's import lock makes it wait for a module this
 thread is still importing, and an import that failed here is tried again there, so its error is
 raised where it always was.
