@@ -15,11 +15,20 @@ The YAML is copied to a temp dir and, for BOTH trainers alike, ``max_steps`` is 
 ``--max-steps`` is given and ``checkpoint_interval`` is raised above ``max_steps``: mlagents 1.1.0
 exports ONNX at every checkpoint with ``torch.onnx.export`` (dynamo by default on torch 2.13, which
 needs ``onnxscript``), so a checkpoint inside the run would crash the reference. Its FINAL export
-still fails (exit code 1, ``No module named 'onnxscript'``) after the last summary was written;
-that outcome is recorded and the run is still measured from its TensorBoard events.
+still fails (exit code 1, ``No module named 'onnxscript'``) after the last summary was written:
+torch 2.13's ``torch.onnx.export`` defaults to the dynamo exporter, which needs onnxscript, and
+its older TorchScript exporter (``dynamo=False``) needs ``onnx``, whose release in the interop venv
+needs protobuf >= 5 where ML-Agents pins 3.20.3. That outcome is recorded and the run is still
+measured from its TensorBoard events. The crash skips the rest of the reference's final save (the
+first behavior's ONNX, every other behavior's checkpoint and ONNX, timers.json), which ours does:
+so besides the process wall time, both are also timed to their last summary (``to_last_summary_s``:
+process start to the wall time of the last summary event, before either's final save), the like-
+with-like comparison while the reference cannot finish.
 
 Reported per trainer:
   * wall_s            process start to exit (imports, env launch, training, final save/export)
+  * to_last_summary_s process start to the last summary's event wall time (no final save/export);
+                      agent_steps_per_s_to_last_summary = final summary step / it
   * agent_steps_per_s final summary step / wall_s (steps count agent-steps, as in ML-Agents)
   * steady_steps_per_s (last - first summary step) / (their event wall_time difference): no startup
   * cpu_s, agent_steps_per_cpu_s  user+sys CPU of the trainer and its reaped children (the stub):
@@ -120,6 +129,7 @@ def run_trainer(command: list[str], cwd: Path, env: dict[str, str], timeout: flo
                 log_path: Path) -> dict:
     """Run one trainer process (output to log_path); returns exit code, wall seconds, output tail."""
     cpu_before = children_cpu_seconds()
+    started_at = time.time()  # the clock of the summary events' wall_time
     started = time.perf_counter()
     with open(log_path, "w") as log:
         completed = subprocess.run(command, cwd=cwd, env=env, stdout=log, stderr=subprocess.STDOUT,
@@ -127,7 +137,8 @@ def run_trainer(command: list[str], cwd: Path, env: dict[str, str], timeout: flo
     wall = time.perf_counter() - started
     cpu = children_cpu_seconds() - cpu_before
     output = log_path.read_text(errors="replace")
-    return {"returncode": completed.returncode, "wall_s": wall, "cpu_s": cpu, "output_tail": output[-3000:],
+    return {"returncode": completed.returncode, "wall_s": wall, "started_at": started_at, "cpu_s": cpu,
+            "output_tail": output[-3000:],
             "onnx_export_failed": ONNXSCRIPT_FAILURE in output, "log": str(log_path)}
 
 
@@ -181,8 +192,11 @@ def summarize(label: str, run: dict, rewards: list[dict], run_dir: Path) -> dict
     if len(rewards) >= 2:
         span = rewards[-1]["wall_time"] - rewards[0]["wall_time"]
         steady = (rewards[-1]["step"] - rewards[0]["step"]) / span if span > 0 else None
+    to_last = rewards[-1]["wall_time"] - run["started_at"] if rewards else None
     return {"trainer": label, **run, "final_step": final_step,
             "agent_steps_per_s": final_step / run["wall_s"] if run["wall_s"] > 0 else None,
+            "to_last_summary_s": to_last,
+            "agent_steps_per_s_to_last_summary": final_step / to_last if to_last and to_last > 0 else None,
             "agent_steps_per_cpu_s": final_step / run["cpu_s"] if run["cpu_s"] > 0 else None,
             "simulator_cpu_s": simulator_cpu, "trainer_cpu_s": trainer_cpu,
             "agent_steps_per_trainer_cpu_s": final_step / trainer_cpu if trainer_cpu else None,
@@ -228,6 +242,7 @@ def compare(ours: dict, reference: dict) -> dict:
     reward_ok = (ours_mean is not None and ref_mean is not None
                  and ours_mean >= ref_mean - REWARD_TOLERANCE * max(1.0, abs(ref_mean)))
     return {"speedup_agent_steps_per_s": speedup, "speedup_steady": ratio("steady_steps_per_s"),
+            "speedup_to_last_summary": ratio("agent_steps_per_s_to_last_summary"),
             "speedup_per_cpu_s": ratio("agent_steps_per_cpu_s"),
             "speedup_per_trainer_cpu_s": ratio("agent_steps_per_trainer_cpu_s"),
             "compared_steps": last, "ours_last_mean_reward": ours_mean,
@@ -271,12 +286,12 @@ def fmt(value, spec: str = ".1f") -> str:
 
 def markdown(task: str, ours: dict, reference: dict, verdict: dict) -> str:
     lines = [f"### train benchmark: {task}", "",
-             "| trainer | exit | wall s | CPU s | of which simulator | final step | agent-steps/s "
-             "| steady steps/s | agent-steps/CPU-s | agent-steps/trainer-CPU-s | timers total s |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| trainer | exit | wall s | to last summary s | CPU s | of which simulator | final step "
+             "| agent-steps/s | steady steps/s | agent-steps/CPU-s | agent-steps/trainer-CPU-s | timers total s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for row in (ours, reference):
         lines.append(f"| {row['trainer']} | {row['returncode']} | {fmt(row['wall_s'])} | "
-                     f"{fmt(row['cpu_s'])} | {fmt(row['simulator_cpu_s'])} | {row['final_step']} | "
+                     f"{fmt(row['to_last_summary_s'], '.2f')} | {fmt(row['cpu_s'])} | {fmt(row['simulator_cpu_s'])} | {row['final_step']} | "
                      f"{fmt(row['agent_steps_per_s'])} | {fmt(row['steady_steps_per_s'])} | "
                      f"{fmt(row['agent_steps_per_cpu_s'])} | {fmt(row['agent_steps_per_trainer_cpu_s'])} | "
                      f"{fmt(row['timers_total_s'])} |")
@@ -288,6 +303,7 @@ def markdown(task: str, ours: dict, reference: dict, verdict: dict) -> str:
                      f"{fmt(ref_by_step.get(step), '.3f')} |")
     lines += ["",
               f"speed ratio (agent-steps/s): {fmt(verdict['speedup_agent_steps_per_s'], '.2f')}x, "
+              f"to the last summary (no final save): {fmt(verdict['speedup_to_last_summary'], '.2f')}x, "
               f"steady-state: {fmt(verdict['speedup_steady'], '.2f')}x, per CPU-second: "
               f"{fmt(verdict['speedup_per_cpu_s'], '.2f')}x, per trainer CPU-second (the simulator's own "
               f"CPU, from its log, subtracted): {fmt(verdict['speedup_per_trainer_cpu_s'], '.2f')}x "
@@ -385,6 +401,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n{len(pairs)} pairs, speed ratios (agent-steps/s): "
               + ", ".join(f"{r:.2f}x" for r in ratios) + f"; median {median:.2f}x "
               f"(target >= {TARGET_SPEEDUP:g}x)")
+        to_last = sorted(p["verdict"]["speedup_to_last_summary"] or 0.0 for p in pairs)
+        print(f"{len(pairs)} pairs, speed ratios to the last summary (neither's final save): "
+              + ", ".join(f"{r:.2f}x" for r in to_last) + f"; median {statistics.median(to_last):.2f}x")
     seed_rewards = None
     if args.seeds and len(pairs) > 1:
         seed_rewards = rewards_over_seeds(pairs)

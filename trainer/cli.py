@@ -84,6 +84,11 @@ def version_lines() -> list[str]:
     ]
 
 
+def log_versions() -> None:
+    for line in version_lines():
+        logger.info(line)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
@@ -107,8 +112,6 @@ def main(argv: list[str] | None = None) -> int:
 
             return run_check(options)
         print(LOGO)
-        for line in version_lines():
-            logger.info(line)
         from trainer.stop import STOP
 
         STOP.install()
@@ -117,10 +120,20 @@ def main(argv: list[str] | None = None) -> int:
         if options.capture_spec is not None:
             from trainer.capture import capture_spec
 
+            log_versions()
             return capture_spec(options, env_vars)
-        from trainer.run import run_training
+        # the simulators launch before the loop's modules are imported (torch among them, in the
+        # background): they boot meanwhile (docs/performance.md, "Start-up and exit")
+        from trainer.run_setup import launch_simulators
 
-        return run_training(options, env_vars)
+        launched = launch_simulators(options, env_vars)
+        try:
+            log_versions()  # after the launch: reading the packages' metadata takes 40-50 ms
+            from trainer.run import run_training
+        except BaseException:
+            launched.pool.close()
+            raise
+        return run_training(options, env_vars, launched)
     except (UserError, ProtocolError) as err:
         if debug:
             logger.exception("error")

@@ -17,10 +17,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+# numpy 2 loads these two on first use: np.union1d (RunState.ensure_runner) needs numpy.ma and
+# noise_generator numpy.random. Imported here, they load with the run's modules while the
+# simulators boot, not between the handshake and the first actions (30-50 ms of CPU).
+import numpy.ma  # noqa: F401
+import numpy.random  # noqa: F401
+
 from protos.types import BehaviorSpec
 from trainer.common.initial_parameters import actor_parameters
 from trainer.common.numpy_net import NumpyActor
 from trainer.common.numpy_policy import NumpyPolicy, noise_generator
+from trainer.ppo.hyperparams import PPOHyperparams
+from trainer.sac.hyperparams import SACHyperparams
 
 
 @dataclass
@@ -57,9 +65,6 @@ class StartingBehavior:
                seed: int) -> "StartingBehavior | None":
         """The behavior's first-steps policy, or None if it must wait for torch (visual
         observations, or a configuration the caller ruled out)."""
-        from trainer.ppo.hyperparams import PPOHyperparams
-        from trainer.sac.hyperparams import SACHyperparams
-
         if settings.self_play is not None or settings.init_path:
             return None
         squashed = settings.trainer_type == "sac"

@@ -44,14 +44,13 @@ from trainer.config.support import goal_conditioning_note
 from trainer.curriculum import EnvironmentParameterManager
 from trainer import warmup
 from trainer.distributed import RankLost, Ranks
-from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool
+from trainer.envs.pool import EnvPool
 from trainer.first_steps import StartingBehavior
 from trainer.errors import ResultsWriteError, UnityCommunicatorStoppedError
 from trainer.protocol.codec import NON_FINITE_STAT
-from trainer.results_dir import prepare_run_dir, run_dir_of
 from trainer.rollout import AgentTracker, GroupTracker, concat_masks
 from trainer.run_setup import (
-    behavior_recorder, check_torch_device, configure_torch_threads, pool_settings_of, warn_if_not_loopback,
+    Launched, behavior_recorder, check_torch_device, configure_torch_threads, launch_simulators,
 )
 from trainer.selfplay import TeamController
 from trainer.side_channel_payloads import engine_config_messages, environment_parameter_messages, make_routers
@@ -456,30 +455,20 @@ class RunState:
                                  float(np.mean(list(rewards)[-100:])) if rewards else None)
 
 
-def run_training(options, env_vars: EnvVars | None = None) -> int:
+def run_training(options, env_vars: EnvVars | None = None, launched: Launched | None = None) -> int:
     """Train (or run inference) as configured; ``env_vars``: the MLAGENTS_LIKE_* choices read at
-    start (trainer/cli.py; the defaults if None). Returns the process exit code."""
+    start (trainer/cli.py; the defaults if None); ``launched``: the simulators trainer/cli.py
+    launched before importing this module (launched here if None). Returns the process exit code."""
     env_vars = env_vars or EnvVars()
     crash_points.arm(env_vars.crash_at)
     ck = options.checkpoint_settings
     env = options.env_settings
-    pool_settings = pool_settings_of(options, env_vars)
     main = env_vars.ranks.rank == 0  # data-parallel ranks: rank 0 alone writes files (trainer/distributed.py)
     state: RunState | None = None
-    # resolves --env first: a wrong path must not leave a results folder that blocks the rerun
-    pool = EnvPool(pool_settings, initial_side_channel=lambda: state.initial_side_channel())
-    if main:
-        run_dir = prepare_run_dir(options)  # refuses before anything starts; the simulators log into it
-    else:
-        run_dir = run_dir_of(options)
-        os.makedirs(os.path.join(run_dir, "run_logs"), exist_ok=True)  # this rank's simulators' logs
-    warn_if_not_loopback(env.bind, str(DEFAULT_EDITOR_PORT) if env.env_path is None else
-                         f"{env.base_port}" + (f"-{env.base_port + env.num_envs - 1}" if env.num_envs > 1 else ""))
-    # the simulators boot from here on; meanwhile torch, the networks and the ONNX exporter are
-    # imported in the background, and this thread sets up the results folder's files and answers
-    # the handshake and the first RESET before it needs torch (docs/performance.md, "Start-up and exit")
-    pool.launch()
-    warmup.start()
+    # the simulators boot from here on, while this thread sets up the results folder's files; it
+    # answers the handshake and the first RESET before it needs torch (docs/performance.md,
+    # "Start-up and exit")
+    pool, run_dir = launched or launch_simulators(options, env_vars)
     try:
         status_path = os.path.join(run_dir, "run_logs", "training_status.json")
         keep_status = (ck.resume or ck.inference) and os.path.isfile(status_path)
@@ -498,6 +487,7 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
         reporter = StatsReporter(writers)
         state = RunState(options, run_dir, pool, params, reporter, status, timers, progress,
                          make_routers(env.num_envs), env_vars, behavior_recorder(options))
+        pool.initial_side_channel = state.initial_side_channel  # for a restarted simulator
         if ck.record_video and main:
             state.clips = ClipRecorder.for_env(env.env_path, env.seed, run_dir, state.environment_side_channel,
                                                env.env_args or ())
@@ -507,6 +497,10 @@ def run_training(options, env_vars: EnvVars | None = None) -> int:
     for line in params.describe():
         logger.info(line)
     stopped = write_failed = False
+    # torch, the networks and the exporter are imported in the background from here on, while this
+    # thread waits for the handshake: started earlier, the import would share the CPUs with the
+    # simulator's boot and this thread's set-up above, both of which the first step waits for
+    warmup.start()
     try:
         STOP.check()
         pool.connect()

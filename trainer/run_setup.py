@@ -1,20 +1,51 @@
-"""What a run checks and builds before its loop starts: the simulator pool's settings (and which
-configurations data-parallel ranks cannot run), the torch device and thread count, the
-behaviors.json recorder, and a warning when the server listens beyond this machine."""
+"""What a run checks and builds before its loop starts: the simulators' launch (with the simulator
+pool's settings, which configurations data-parallel ranks cannot run, and the results folder), the
+torch device and thread count, the behaviors.json recorder, and a warning when the server listens
+beyond this machine.
+
+Imported before torch and the loop's modules (trainer/cli.py): the simulators are launched first,
+so keep this module's imports light."""
 from __future__ import annotations
 
 import ipaddress
 import logging
 import os
+from typing import NamedTuple
 
 from trainer.artifacts.behaviors import BehaviorRecorder
 from trainer.config.env_vars import EnvVars
 from trainer.distributed import check_split
-from trainer.envs.pool import PoolSettings
+from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
 from trainer.errors import ConfigError, UserError
-from trainer.results_dir import run_dir_of
+from trainer.results_dir import prepare_run_dir, run_dir_of
 
 logger = logging.getLogger("mlagents_like")
+
+
+class Launched(NamedTuple):
+    """What ``launch_simulators`` started: the simulators (booting) and the run's results folder."""
+
+    pool: EnvPool
+    run_dir: str
+
+
+def launch_simulators(options, env_vars: EnvVars) -> Launched:
+    """The last checks that need no simulator, the results folder, then listen and launch every
+    simulator: from here on they boot while the trainer imports and sets up the rest, and
+    ``run_training`` starts the background import of torch (docs/performance.md, "Start-up and
+    exit"). The caller closes the pool."""
+    env = options.env_settings
+    # resolves --env first: a wrong path must not leave a results folder that blocks the rerun
+    pool = EnvPool(pool_settings_of(options, env_vars))
+    if env_vars.ranks.rank == 0:  # data-parallel ranks: rank 0 alone writes files (trainer/distributed.py)
+        run_dir = prepare_run_dir(options)  # refuses before anything starts; the simulators log into it
+    else:
+        run_dir = run_dir_of(options)
+        os.makedirs(os.path.join(run_dir, "run_logs"), exist_ok=True)  # this rank's simulators' logs
+    warn_if_not_loopback(env.bind, str(DEFAULT_EDITOR_PORT) if env.env_path is None else
+                         f"{env.base_port}" + (f"-{env.base_port + env.num_envs - 1}" if env.num_envs > 1 else ""))
+    pool.launch()
+    return Launched(pool, run_dir)
 
 
 def warn_if_not_loopback(bind: str, ports: str) -> None:

@@ -21,6 +21,28 @@ from tests.integration.conftest import free_port_block, learn, run_with_signals
 from trainer.stop import EXIT_STOPPED
 
 
+def processes_naming(text: str) -> dict[int, str]:
+    """{pid: command line} of this machine's processes whose command line contains ``text`` (a
+    simulator's names its log file, under the run's results folder)."""
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                command = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            except OSError:  # exited meanwhile
+                continue
+            if text in command:
+                found[int(entry.name)] = command
+    return found
+
+
+def assert_no_process_left(text: str) -> None:
+    left = processes_naming(text)
+    for pid in left:  # a failing test leaves nothing behind either
+        os.kill(pid, signal.SIGKILL)
+    assert not left
+
+
 def scalars(folder):
     acc = EventAccumulator(str(folder), size_guidance={"scalars": 0, "tensors": 0})
     acc.Reload()
@@ -369,12 +391,48 @@ def test_unusable_torch_device_is_one_message_and_exit_2(tmp_path, basic_config,
     assert f"torch_settings.device '{device}' cannot be used here" in r.stderr
     assert "Traceback" not in r.stderr + r.stdout
     assert not (tmp_path / "res" / "ppo" / "Basic").exists()  # nothing was trained or saved
+    assert (tmp_path / "res" / "ppo" / "run_logs" / "Player-0.log").is_file()  # a simulator was launched
+    assert_no_process_left(str(tmp_path / "res"))  # and is gone
     # the folder that start left is only configuration: the corrected rerun needs no --force
     r = learn([str(basic_config(max_steps=300)), "--env", "stub:basic", "--torch-device", "cpu",
                "--base-port", str(free_port_block()), "--results-dir", res], cwd=tmp_path, timeout=120,
               env=env_no_proxy)
     assert r.returncode == 0, r.stderr[-2000:]
     assert (tmp_path / "res" / "ppo" / "Basic.onnx").is_file()
+
+
+LAUNCH_THEN_FAIL = """
+import sys
+from trainer.cli import entry
+from trainer.errors import ConfigError
+
+class Refuse:  # the loop's modules cannot be imported: a user error found after the simulators' launch
+    def find_spec(self, name, path=None, target=None):
+        if name == "trainer.run":
+            raise ConfigError("the loop cannot start (test)")
+
+sys.meta_path.insert(0, Refuse())
+entry()  # the console script: os._exit at the end, no interpreter teardown to clean up after it
+"""
+
+
+def test_simulator_launched_before_the_loop_is_stopped_when_the_start_fails(tmp_path, basic_config, env_no_proxy):
+    """trainer/cli.py launches the simulators before it imports the loop's modules; if the start
+    fails there, the simulator it launched is stopped, not left behind. The simulator here never
+    connects and would sleep for 120 s."""
+    game = tmp_path / "Sleeper.x86_64"
+    game.write_text(f"#!/bin/sh\nexec {sys.executable} -c 'import time; time.sleep(120)' \"$@\"\n")
+    game.chmod(0o755)
+    driver = tmp_path / "driver.py"
+    driver.write_text(LAUNCH_THEN_FAIL)
+    res = tmp_path / "res"
+    r = subprocess.run([sys.executable, str(driver), str(basic_config(max_steps=300)), "--env", str(game),
+                        "--run-id", "r", "--results-dir", str(res), "--base-port", str(free_port_block()),
+                        "--debug"], cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env_no_proxy)
+    assert "Launching " in r.stdout  # it had launched the simulator
+    assert_no_process_left(str(res))
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert "mlagents-like-learn: error: the loop cannot start (test)" in r.stderr
 
 
 def test_force_starts_the_run_id_again_from_step_0(tmp_path, basic_config, env_no_proxy):

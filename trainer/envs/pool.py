@@ -111,9 +111,10 @@ class _Worker:
 
 
 class EnvPool:
-    def __init__(self, settings: PoolSettings, initial_side_channel: Callable[[], bytes]):
-        """``initial_side_channel`` returns the bytes a fresh simulator needs with its first RESET
-        (engine configuration and current environment parameters)."""
+    def __init__(self, settings: PoolSettings, initial_side_channel: Callable[[], bytes] = lambda: b""):
+        """``initial_side_channel`` returns the bytes a restarted simulator needs with its first
+        RESET (engine configuration and current environment parameters); the run sets it once its
+        state exists (trainer/run.py), after the launch."""
         if settings.env_path is None and settings.num_envs != 1:
             raise UserError("--num-envs > 1 needs --env: the Unity Editor is a single environment.")
         env_path = resolve_env_path(settings.env_path) if settings.env_path else None
@@ -122,7 +123,7 @@ class EnvPool:
         spin_wait = spin_budget(settings.num_envs + 1, settings.spin_wait_s)
         self.workers = [_Worker(settings.first_worker + i, settings, env_path, spin_wait)
                         for i in range(settings.num_envs)]
-        self._initial_side_channel = initial_side_channel
+        self.initial_side_channel = initial_side_channel
         # each worker has its own restart quota, as in ML-Agents: two simulators that crash in the
         # same minute are both restarted under the default limit of 1 per 60 s
         self._restarts = [RestartPolicy(settings.max_lifetime_restarts, settings.restarts_rate_limit_n,
@@ -226,7 +227,7 @@ class EnvPool:
                                w.worker_id, err)
                 self._restart_process(w)
             for w in self.workers:
-                w.endpoint.send_reset(self._initial_side_channel())
+                w.endpoint.send_reset(self.initial_side_channel())
             results, failed = self._receive_all()
         return results
 
