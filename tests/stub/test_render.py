@@ -226,3 +226,30 @@ def test_evaluate_video_films_each_scripted_dodge_throw(tmp_path):
     with av.open(clips[1]) as container:
         frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
     assert 10 <= len(frames) <= 60 and frames[0].shape == (72, 96, 3)
+
+
+@pytest.mark.may_skip_in_ci  # triton comes with PyPI's CUDA torch (Python 3.12/3.13 here), not the CPU wheel
+def test_triton_imports_after_a_frame_is_rendered():
+    """A frame first (Mesa's driver brings its LLVM into the process), then ``import triton``, as
+    torch.optim's first optimizer does: without unity_stub_env.render.gl.load_triton_first the
+    process died with SIGSEGV in triton's initialisers (docs/python-versions.md, "triton and Mesa's
+    LLVM in one process"). In a fresh process: this worker may have loaded triton already."""
+    import importlib.util
+
+    if importlib.util.find_spec("triton") is None:
+        pytest.skip("triton is not installed (it comes with PyPI's CUDA torch)")
+    script = (
+        "import numpy as np\n"
+        "from unity_stub_env.gym.render import FrameRenderer\n"
+        "from unity_stub_env.tasks import make_task\n"
+        "frame = FrameRenderer(make_task('ball3d', num_areas=1, seed=0), 60, 80).frame()\n"
+        "maps = open('/proc/self/maps').read()\n"
+        "import triton, torch\n"
+        "torch.optim.Adam([torch.zeros(2, requires_grad=True)])\n"  # imports torch._dynamo, which imports triton
+        "print(int(frame.std() * 100), 'libLLVM' in maps, 'libtriton.so' in maps)\n")
+    env = {**os.environ, "PYTHONPATH": REPO}
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, env=env)
+    assert run.returncode == 0, f"exit {run.returncode}: {run.stderr[-2000:]}"
+    std, llvm, triton_loaded = run.stdout.split()
+    assert int(std) > 1000 and triton_loaded == "True"  # a real picture, triton's library loaded before the frame
+    print("Mesa's libLLVM in the process:", llvm)
