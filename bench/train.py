@@ -284,6 +284,16 @@ def fmt(value, spec: str = ".1f") -> str:
     return "-" if value is None else format(value, spec)
 
 
+def ratios_line(pairs: list[dict], key: str, label: str) -> str:
+    """One verdict ratio over the pairs, sorted, and its median; a pair without it (a run that
+    wrote no summary) is counted, not given a ratio."""
+    ratios = sorted(p["verdict"][key] for p in pairs if p["verdict"][key] is not None)
+    missing = len(pairs) - len(ratios)
+    median = f"; median {statistics.median(ratios):.2f}x" if ratios else ""
+    return (f"{len(pairs)} pairs, speed ratios {label}: " + ", ".join(f"{r:.2f}x" for r in ratios) + median
+            + (f"; {missing} without one" if missing else ""))
+
+
 def markdown(task: str, ours: dict, reference: dict, verdict: dict) -> str:
     lines = [f"### train benchmark: {task}", "",
              "| trainer | exit | wall s | to last summary s | CPU s | of which simulator | final step "
@@ -396,14 +406,10 @@ def main(argv: list[str] | None = None) -> int:
                           "verdict": verdict})
     ours, reference, verdict = pairs[-1]["ours"], pairs[-1]["reference"], pairs[-1]["verdict"]
     if len(pairs) > 1:
-        ratios = sorted(p["verdict"]["speedup_agent_steps_per_s"] for p in pairs)
-        median = statistics.median(ratios)
-        print(f"\n{len(pairs)} pairs, speed ratios (agent-steps/s): "
-              + ", ".join(f"{r:.2f}x" for r in ratios) + f"; median {median:.2f}x "
-              f"(target >= {TARGET_SPEEDUP:g}x)")
-        to_last = sorted(p["verdict"]["speedup_to_last_summary"] or 0.0 for p in pairs)
-        print(f"{len(pairs)} pairs, speed ratios to the last summary (neither's final save): "
-              + ", ".join(f"{r:.2f}x" for r in to_last) + f"; median {statistics.median(to_last):.2f}x")
+        print()
+        print(ratios_line(pairs, "speedup_agent_steps_per_s", "(agent-steps/s)")
+              + f" (target >= {TARGET_SPEEDUP:g}x)")
+        print(ratios_line(pairs, "speedup_to_last_summary", "to the last summary (neither's final save)"))
     seed_rewards = None
     if args.seeds and len(pairs) > 1:
         seed_rewards = rewards_over_seeds(pairs)
