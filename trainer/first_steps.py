@@ -17,12 +17,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-# numpy 2 loads these two on first use: np.union1d (RunState.ensure_runner) needs numpy.ma and
-# noise_generator numpy.random. Imported here, they load with the run's modules while the
-# simulators boot, not between the handshake and the first actions (30-50 ms of CPU).
-import numpy.ma  # noqa: F401
-import numpy.random  # noqa: F401
-
 from protos.types import BehaviorSpec
 from trainer.common.initial_parameters import actor_parameters
 from trainer.common.numpy_net import NumpyActor

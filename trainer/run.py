@@ -24,6 +24,10 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
+# numpy 2 loads numpy.ma on first use, which np.union1d (RunState.ensure_runner) needs: imported
+# here, with the run's modules while the simulators boot, not between the handshake and the first
+# actions (with numpy.random in numpy_policy.py: 30-50 ms of CPU)
+import numpy.ma  # noqa: F401
 
 from protos import side_channels as sc
 from protos.types import ActionTuple, DecisionSteps, StatsAggregationMethod, StepResult, TerminalSteps, brain_name_of

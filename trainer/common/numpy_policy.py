@@ -19,6 +19,9 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
+# numpy 2 loads numpy.random on first use (noise_generator): imported with this module, while the
+# simulators boot, not between the handshake and the first actions (trainer/run.py's numpy.ma too)
+import numpy.random  # noqa: F401
 
 from protos.types import ActionTuple
 from trainer.common import numpy_distributions as nd
