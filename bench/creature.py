@@ -3,7 +3,7 @@
     .venv/bin/python bench/creature.py steps [--areas 1 8] [--steps 200] [--repeats 5] [--kind quadruped]
     .venv/bin/python bench/creature.py noise [--sigmas 0 0.1 0.3 1] [--areas 4] [--minutes 1]
     .venv/bin/python bench/creature.py evaluate POLICY [POLICY ...] [--kind quadruped --creature-seed 7]
-                     [--roughness 0] [--target-speed 1] [--areas 8] [--minutes 2] [--seed 0]
+                     [--roughness 0] [--target-speed 1] [--gait-clock-hz 0] [--areas 8] [--minutes 2] [--seed 0]
 
 ``steps``: per area count, three rows on the same MjModel (one creature per arena):
   * ``stub creature`` ``CreatureTask.step`` + ``reset`` of the finished agents, random actions in [-1, 1]
@@ -47,9 +47,10 @@ from dodge_steps import best_of  # noqa: E402  (bench/ is the script's folder on
 OUT = Path(__file__).resolve().parent / "out"
 
 
-def _params(kind: str, creature_seed: int, roughness: float = 0.0, target_speed: float = 1.0
-            ) -> EnvironmentParameters:
+def _params(kind: str, creature_seed: int, roughness: float = 0.0, target_speed: float = 1.0,
+            gait_clock_hz: float = 0.0) -> EnvironmentParameters:
     params = EnvironmentParameters()
+    params.set("gait_clock_hz", lambda: gait_clock_hz)
     params.set("creature_kind", lambda: float(KINDS.index(kind)))
     params.set("creature_seed", lambda: float(creature_seed))
     params.set("terrain_roughness", lambda: roughness)
@@ -122,7 +123,8 @@ def _sampling(path: str):
 
 
 def evaluate_command(args) -> dict:
-    params = lambda: _params(args.kind, args.creature_seed, args.roughness, args.target_speed)  # noqa: E731
+    params = lambda: _params(args.kind, args.creature_seed, args.roughness, args.target_speed,  # noqa: E731
+                             args.gait_clock_hz)
     task = make_task("creature", num_areas=args.areas, seed=args.seed, env_params=params())
     size, actions = task.observation_specs[0].shape[0], task.action_spec.continuous_size
     control_steps = int(round(args.minutes * 60.0 / task.control_dt))
@@ -134,7 +136,7 @@ def evaluate_command(args) -> dict:
             act = _sampling(policy)
         results[policy] = run_policy(task, act, control_steps)
     print(f"{args.kind} seed {args.creature_seed}, roughness {args.roughness}, target speed {args.target_speed} m/s, "
-          f"{args.areas} arenas x "
+          f"gait clock {args.gait_clock_hz} Hz, {args.areas} arenas x "
           f"{args.minutes} simulated min, {'sampled' if args.sample else 'mean'} actions")
     print("| policy | targets / min | distance m / min | towards target m / min | falls / min | mean reward / step |")
     print("|---|---|---|---|---|---|")
@@ -177,6 +179,9 @@ def main() -> None:
     evaluate.add_argument("--target-speed", type=float, default=1.0,
                           help="the environment parameter target_speed (m/s) the policies were trained with: "
                                "it is in their observation and sets the reward")
+    evaluate.add_argument("--gait-clock-hz", type=float, default=0.0,
+                          help="the environment parameter gait_clock_hz the policies were trained with (0: none; "
+                               "it sets the observation's size)")
     evaluate.add_argument("--sample", action="store_true",
                           help="act with the .onnx policies' sampled actions (as in training) instead of their mean")
     noise = sub.add_parser("noise")

@@ -166,6 +166,33 @@ def test_fall_penalty_sets_the_reward_of_the_falling_step_only():
         make_task("creature", num_areas=1, seed=0, env_params=_params(fall_penalty=-1.0))
 
 
+def test_gait_clock_adds_sin_and_cos_of_the_episode_time():
+    # default: no clock, the observation as before; 1.25 Hz: two more values, the phase
+    # 2 pi 1.25 Hz x (k x 0.05 s) = k pi / 8 after k control steps
+    bones_hinges = 14 + 10 * 23 + 30  # quadruped seed 7: 23 bones, 30 hinges
+    plain = make_task("creature", num_areas=2, seed=0, env_params=_params(creature_seed=7))
+    assert plain.observation_specs[0].shape == (bones_hinges,)
+    task = make_task("creature", num_areas=2, seed=0, env_params=_params(creature_seed=7, gait_clock_hz=1.25))
+    assert task.observation_specs[0].shape == (bones_hinges + 2,)
+    s, c = np.sqrt(0.5), np.sqrt(0.5)
+    expected = {0: (0.0, 1.0), 2: (s, c), 4: (1.0, 0.0), 8: (0.0, -1.0), 12: (-1.0, 0.0)}
+    for k in range(13):
+        obs = task.observe()[0]
+        assert obs.shape == (2, bones_hinges + 2)
+        if k in expected:
+            assert obs[:, -2:] == pytest.approx(np.tile(expected[k], (2, 1)), abs=1e-6)
+        # the rest of the observation is the clock-free task's
+        assert np.array_equal(obs[:, :-2], plain.observe()[0])
+        task.step(_zeros(task), np.zeros((2, 0)))
+        plain.step(_zeros(plain), np.zeros((2, 0)))
+    # an episode start restarts the clock of that agent only
+    task.reset(np.array([True, False]))
+    # agent 1 after 13 steps: 13 pi / 8, sin = -sin(3 pi / 8) = -0.92388, cos = cos(3 pi / 8) = 0.38268
+    assert task.observe()[0][:, -2:] == pytest.approx(np.array([[0.0, 1.0], [-0.92388, 0.38268]]), abs=1e-5)
+    with pytest.raises(ValueError, match="gait_clock_hz must be >= 0"):
+        make_task("creature", num_areas=1, seed=0, env_params=_params(gait_clock_hz=-1.0))
+
+
 def test_a_standing_creature_is_interrupted_at_max_step():
     task = make_task("creature", num_areas=1, seed=0)
     task.max_step = 30

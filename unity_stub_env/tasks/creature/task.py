@@ -15,6 +15,8 @@ Environment parameters (Unity's EnvironmentParameters; read where said):
   target_speed        the speed to match, m/s (default 1.0)             at each episode start
   fall_penalty        the reward of a step that ends in a fall is        at each episode start
                       -fall_penalty when > 0 (default 0: no penalty)
+  gait_clock_hz       > 0: two clock observations at this frequency     at construction
+                      (default 0: none; our addition, not Walker's)
 All arenas of a run share one creature morphology: the agents of one behavior must share one
 observation and action spec, and the spec depends on the bone and hinge counts. The morphology is
 fixed when the task is built (the trainer's first message carries the side channel before the
@@ -44,6 +46,11 @@ Observations, float32 [14 + 10 B + J] per agent (B bones, J hinges), in this ord
   per bone: ground contact in the control step (0/1), its CoM's velocity (3, cube frame), its
           angular velocity (3, cube frame), its CoM minus the creature's CoM (3, cube frame)
   per hinge: its angle mapped linearly from [min, max] to [-1, 1]
+  with gait_clock_hz = f > 0 only, two more: sin(2 pi f t), cos(2 pi f t), t = the episode's time
+          (control steps x 0.05 s; 0 at the episode start). A policy that sees only the state has
+          no time input, so its mean action is a function of the pose alone; the clock lets the
+          mean action be a rhythm (docs/stub-tasks.md, "creature: a recipe that walks with its
+          mean actions", says why a run may want it). Neither Walker nor the creature report has it.
 
 Reward per control step (Walker's product of two terms, both in [0, 1]):
   match_speed = (1 - (min(|v_goal - v_avg|, s) / s)^2)^2, s = target_speed, v_goal = s * cube forward,
@@ -101,7 +108,7 @@ SUBSTEPS = 10
 MAX_STEP = 1000
 VITAL = ("torso", "hip", "shoulder", "neck", "head")
 DEFAULTS = {"creature_kind": 0.0, "creature_seed": 0.0, "terrain_roughness": 0.0, "obstacles": 0.0,
-            "target_speed": 1.0, "fall_penalty": 0.0}
+            "target_speed": 1.0, "fall_penalty": 0.0, "gait_clock_hz": 0.0}
 PARK = np.array([0.0, 0.0, -10.0])  # where unused obstacles wait (below every heightfield)
 
 
@@ -151,13 +158,22 @@ def arena_xml(skeleton: Skeleton, num_areas: int) -> str:
             + "  </actuator>\n</mujoco>\n")
 
 
-def observation_size(skeleton: Skeleton) -> int:
-    """The observation's length for ``skeleton``: 14 + 10 per bone + 1 per hinge (module docstring)."""
-    return 14 + 10 * len(skeleton.bones) + skeleton.num_hinges()
+def observation_size(skeleton: Skeleton, clock: bool = False) -> int:
+    """The observation's length for ``skeleton``: 14 + 10 per bone + 1 per hinge, + 2 with the gait
+    clock (module docstring)."""
+    return 14 + 10 * len(skeleton.bones) + skeleton.num_hinges() + (2 if clock else 0)
 
 
-def _specs(skeleton: Skeleton) -> tuple[tuple[ObservationSpec, ...], ActionSpec]:
-    size = observation_size(skeleton)
+def gait_clock_of(env_params: EnvironmentParameters) -> float:
+    """The environment parameter gait_clock_hz (0: no clock observations), checked."""
+    hz = float(env_params.get("gait_clock_hz", DEFAULTS["gait_clock_hz"]))
+    if not (np.isfinite(hz) and hz >= 0):
+        raise ValueError(f"environment parameter gait_clock_hz must be >= 0 (0: no clock), got {hz:g}")
+    return hz
+
+
+def _specs(skeleton: Skeleton, clock: bool = False) -> tuple[tuple[ObservationSpec, ...], ActionSpec]:
+    size = observation_size(skeleton, clock)
     return ((ObservationSpec((size,), (DimensionProperty.NONE,), ObservationType.DEFAULT, f"VectorSensor_size{size}"),),
             ActionSpec(continuous_size=skeleton.num_hinges(), discrete_branches=()))
 
@@ -176,13 +192,14 @@ class CreatureTask(Task):
     description = ("Generated creature walking to targets over generated terrain (docs/stub-tasks.md). Shapes shown for "
                    "the default quadruped (creature_kind 0, creature_seed 0); they follow the creature. "
                    "Reward: Walker's match-speed x look-at-target. Env params: creature_kind, creature_seed, "
-                   "terrain_roughness, obstacles, target_speed, fall_penalty.")
+                   "terrain_roughness, obstacles, target_speed, fall_penalty, gait_clock_hz.")
 
     def __init__(self, num_areas: int, seed: int, env_params: EnvironmentParameters | None = None):
         super().__init__(num_areas, seed, env_params)
         n = self.num_agents
         self.skeleton = creature_of(self.env_params)
-        self.observation_specs, self.action_spec = _specs(self.skeleton)
+        self.gait_clock_hz = gait_clock_of(self.env_params)
+        self.observation_specs, self.action_spec = _specs(self.skeleton, self.gait_clock_hz > 0)
         self.model = mujoco.MjModel.from_xml_string(arena_xml(self.skeleton, n))
         self.data = mujoco.MjData(self.model)
         self.rng = np.random.default_rng(self.seed)
@@ -355,7 +372,12 @@ class CreatureTask(Task):
                                   axis=2)
         obs[:, 14:14 + 10 * bones] = per_bone.reshape(n, -1)
         angles = data.qpos[self.hinge_qpos]
-        obs[:, 14 + 10 * bones:] = 2.0 * (angles - self.hinge_low) / (self.hinge_high - self.hinge_low) - 1.0
+        hinges_end = 14 + 10 * bones + len(self.hinge_low)
+        obs[:, 14 + 10 * bones:hinges_end] = 2.0 * (angles - self.hinge_low) / (self.hinge_high - self.hinge_low) - 1.0
+        if self.gait_clock_hz > 0:
+            phase = 2.0 * np.pi * self.gait_clock_hz * self.episode_step * self.control_dt
+            obs[:, hinges_end] = np.sin(phase)
+            obs[:, hinges_end + 1] = np.cos(phase)
         return [obs]
 
     def step(self, continuous: np.ndarray, discrete: np.ndarray) -> TaskStep:
