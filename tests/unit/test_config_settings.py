@@ -205,7 +205,8 @@ def test_configuration_yaml_round_trip(tmp_path):
 
 
 @pytest.mark.parametrize("name, behavior", [("basic", "Basic"), ("ball3d", "3DBall"), ("basic_sac", "Basic"),
-                                            ("ball3d_sac", "3DBall"), ("dodge", "Dodge"), ("dodge_legacy", "Dodge")])
+                                            ("ball3d_sac", "3DBall"), ("dodge", "Dodge"), ("dodge_legacy", "Dodge"),
+                                            ("creature_walk", "Creature"), ("creature_clock", "Creature")])
 def test_shipped_configs_load(name, behavior):
     options = load_run_options(os.path.join(REPO, "configs", f"{name}.yaml"))
     assert behavior in options.behaviors
