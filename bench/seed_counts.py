@@ -88,6 +88,17 @@ def claims() -> list[tuple[str, str]]:
                                 f"{n - fixed} reconstructed"),
     ]
 
+    # The evaluations' defaults and the creature's arena.
+    from unity_stub_env.evaluate import _evaluations as evaluations
+    from unity_stub_env.tasks.creature.task import ARENA_HALF, MAX_OBSTACLES
+    from unity_stub_env.tasks.mimic.evaluation import EVAL_SECONDS
+    out += [
+        ("docs/stub-tasks.md", f"and {evaluations()['dodge'][2]} seeded random throws"),
+        ("docs/stub-tasks.md", f"plays every motion for {EVAL_SECONDS:g} s"),
+        ("docs/stub-tasks.md", f"each area is a {2 * ARENA_HALF:g} m arena"),
+        ("docs/stub-tasks.md", f"`obstacles` 0..{MAX_OBSTACLES}"),
+    ]
+
     # mimic's ragdoll.
     masses = mimic.model.body_mass.sum() / mimic.agents_per_area
     out.append(("docs/stub-tasks.md", f"a {masses:.0f} kg ragdoll with human mass fractions whose "
