@@ -74,7 +74,8 @@ def claims() -> list[tuple[str, str]]:
                                   f"{_thousands(seed_env_steps * agents)} agent decisions"),
         ("docs/performance.md", f"A {our_agent_steps // 10**6} M agent-step dodge run "
                                 f"({round(our_agent_steps / agents / 1000)}k environment steps × {agents} agents)"),
-        ("docs/performance.md", f"That is 1/{seed_env_steps * agents // our_agent_steps} of the dodge thesis' experience"),
+        ("docs/performance.md", f"That is 1/{seed_env_steps * agents // our_agent_steps} of the dodge thesis' "
+                                "experience"),
         ("docs/performance.md", f"≈ {seed_env_steps * agents // 10**6} M agent decisions"),
     ]
 
