@@ -114,6 +114,8 @@ def claims() -> list[tuple[str, str]]:
     assert len(platforms) == 1
     largest = max((sizes[f"{zone}_props"], zone) for zone in ("urban", "rural", "desert"))
     (states, labels), zone = largest
+    from unity_stub_env.tasks.runner.task import LANES
+    out.append(("docs/hmm.md", f"three prop corpora ({len(LANES)} spawn points per platform"))
     out += [
         ("docs/stub-tasks.md", f"{platforms.pop()}-state platform models"),
         ("docs/stub-tasks.md", f"its largest, {states} states × {labels} labels, is {zone}'s here"),
