@@ -18,7 +18,7 @@ reports:
     waits for it), ``send``, ``off_path`` (send returned -> receive starts: experience, updates,
     summaries, while the simulator steps) and ``receive`` (with --spin-ms 0: blocking wait +
     decode; its CPU is the decode and the system calls); thread CPU (``time.thread_time_ns``)
-    median and mean, and wall median, over the steps after the first 2,000.
+    median and mean, and wall median, over the steps after the first 2,000 (or the first half of a shorter run).
 
 Two trees compare best when both runs share the machine's state: start them at the same moment
 (two ports), as bench/RESULTS.md's entries say. No wall time here is quotable on a loaded machine.
@@ -39,7 +39,7 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 LEARN = Path(sys.executable).with_name("mlagents-like-learn")
-SKIP_MARKS = 4000  # the first 2,000 steps' marks (two per call)
+SKIP_STEPS = 2000  # the start-up and first updates; at most half of the run's steps
 
 SITECUSTOMIZE = textwrap.dedent('''
     import os, sys, json, resource, threading
@@ -104,7 +104,8 @@ PHASES = {(3, 0): "decide", (0, 1): "send", (1, 2): "off_path", (2, 3): "receive
 
 def phases(marks: list) -> dict:
     found: dict[str, tuple[list, list]] = {name: ([], []) for name in PHASES.values()}
-    for (kind0, wall0, cpu0), (kind1, wall1, cpu1) in zip(marks[SKIP_MARKS:], marks[SKIP_MARKS + 1:]):
+    skip = 4 * min(SKIP_STEPS, len(marks) // 8)  # four marks a step
+    for (kind0, wall0, cpu0), (kind1, wall1, cpu1) in zip(marks[skip:], marks[skip + 1:]):
         name = PHASES.get((kind0, kind1))
         if name:
             found[name][0].append((wall1 - wall0) / 1e3)
