@@ -64,7 +64,7 @@ SITECUSTOMIZE = textwrap.dedent('''
             _exit(code)
         def _counted_fork():
             pid = _fork()
-            _forks[0] += pid > 0
+            _forks[0] = _forks[0] + 1 if pid > 0 else 0  # a child starts its own count
             return pid
         os._exit, os.fork = _exit_after_dump, _counted_fork
 ''')
