@@ -13,9 +13,9 @@ partial trajectories.
 from __future__ import annotations
 
 import logging
+import socket
 import time
 from dataclasses import dataclass
-import socket
 from typing import TYPE_CHECKING, Callable
 
 from trainer.config.env_vars import DEFAULT_SPIN_WAIT_S
