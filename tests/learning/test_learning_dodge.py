@@ -1,7 +1,9 @@
 """Learning smoke test for ``dodge`` (the dodge thesis, docs/stub-tasks.md): our trainer, the stub
 as a separate process over real gRPC, 14 agents, a fixed seed and a bounded number of steps.
 
-The thesis' configuration (3 x 512, 5 M steps) is a bench run (bench/README.md); this test uses a
+The thesis' configuration (3 x 512; its 5 M 0.x environment steps of 14 agents are 70 M agent steps,
+docs/configuration.md "Legacy formats") is a bench run (bench/RESULTS.md, "dodge: a 5 M
+agent-step run"); this test uses a
 small network with a higher learning rate so that a short run shows learning. What it can learn
 in 120,000 steps is mostly to spend less effort: the effort terms cost a random-acting character
 ~1.35 per episode and a still one ~0.39 (unity-stub-env --task dodge --evaluate zero). Measured

@@ -96,7 +96,7 @@ def test_limbs_are_mirror_symmetric_and_thickest_near_the_body(kind):
             assert np.allclose(MIRROR @ data.geom_xpos[g_right], data.geom_xpos[g_left], atol=1e-5)
 
 
-def test_parametric_structure_matches_the_thesis():
+def test_parametric_structure_matches_the_creature_report():
     for seed in SEEDS:
         quad, biped = generate("quadruped", seed), generate("biped", seed)
         for skeleton in (quad, biped):

@@ -108,7 +108,7 @@ def test_quaternion_product_and_cross_product_match_mujoco_and_numpy():
     np.testing.assert_allclose(cross(a[..., :3], b[..., 1:]), np.cross(a[..., :3], b[..., 1:]), atol=1e-12)
 
 
-def test_reward_is_the_weighted_sum_with_the_thesis_or_the_deepmimic_weights():
+def test_reward_is_the_weighted_sum_with_the_mimic_thesis_or_the_deepmimic_weights():
     for preset, motion, weights in ((0, 2, (0.65, 0.1, 0.1, 0.15, 0.0)), (0, 0, (0.7, 0.15, 0.15, 0, 0)),
                                     (0, 3, (0.56, 0.07, 0.07, 0.1, 0.2)), (1, 0, (0.65, 0.1, 0.1, 0.15, 0))):
         task = _task(motion=motion, reward_weights=preset, residual=1.0)

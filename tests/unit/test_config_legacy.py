@@ -144,7 +144,7 @@ def test_0x_step_counts_become_agent_steps_at_first_contact_and_1x_ones_stay(tmp
     before = options.behavior_settings("Dodge")
     after = options.behavior_settings("Dodge", agents=14)
     assert (before.max_steps, before.summary_freq) == (5000000, 1000)
-    assert (after.max_steps, after.summary_freq) == (70000000, 14000)  # the seed's 5e6 on 14 agents
+    assert (after.max_steps, after.summary_freq) == (70000000, 14000)  # the dodge thesis' 5e6 on 14 agents (docs/stub-tasks.md)
     modern = tmp_path / "modern.yaml"
     modern.write_text("behaviors:\n  Dodge:\n    trainer_type: ppo\n    max_steps: 2000\n    summary_freq: 500\n")
     options = load_run_options(str(modern))

@@ -231,7 +231,7 @@ def test_run_options_from_dict_without_file_has_no_config_path():
     assert options.behaviors["A"] == TrainerSettings()
 
 
-def test_dodge_configs_carry_the_thesis_values_and_agree(caplog):
+def test_dodge_configs_carry_the_dodge_thesis_values_and_agree(caplog):
     """configs/dodge.yaml and the 0.x flat configs/dodge_legacy.yaml: the dodge thesis' hyperparameters
     (gamma 0.995, lambd 0.93, batch 2048, buffer 20480, 5 epochs, horizon 1000, beta 1e-2,
     epsilon 0.3, normalize, 3 x 512, 5e6 steps); the legacy one loads with its warning."""

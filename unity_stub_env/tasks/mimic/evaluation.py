@@ -5,10 +5,10 @@ simulated time (500 decisions at 50 Hz, 2,500 at 250 Hz); then the standing ragd
 with each impulse of PUSH_LADDER (N s; 70 kg: 10 N s changes the whole body's velocity by
 0.14 m/s), in a random horizontal direction at the torso.
 
-The percentage of the maximum reward is the seed project's metric: an episode of fixed length can
-earn at most 1 per decision (the weights sum to 1, every term and the effort factor are <= 1), so a
-trial's reward summed over the 10 s, divided by the decisions in 10 s, is that fraction; the
-decisions after a fall earn 0.
+The percentage of the maximum reward is the mimic thesis' metric (docs/stub-tasks.md, "Seed
+projects"): an episode of fixed length can earn at most 1 per decision (the weights sum to 1,
+every term and the effort factor are <= 1), so a trial's reward summed over the 10 s, divided by
+the decisions in 10 s, is that fraction; the decisions after a fall earn 0.
 """
 from __future__ import annotations
 
