@@ -4,9 +4,12 @@ bench/startup.py's wall times are not.
     PYTHONPATH=<tree> .venv/bin/python bench/startup_marks.py run <mlagents-like-learn arguments>
     .venv/bin/python bench/startup_marks.py gil [--preload]
 
-``run``: runs the trainer's ``main`` in this process and prints, at the pool's launch, its
-handshake (connect) and the first ``send_step``, the wall time since this script started and the
-process's CPU-seconds (getrusage: the main thread's and the background import's together). The
+``run``: runs the trainer's ``main`` in this process and prints, at the pool's launch, the call
+of its handshake (``wait``: the main thread is ready for the simulator), the handshake's end
+(``connected``), the first RESET's answer (``reset``) and the first ``send_step``, the wall time
+since this script started, the process's CPU-seconds (getrusage: the main thread's and the
+background import's together) and the main thread's alone; at the end, the simulator's own
+"Connected to trainer" line (its log, Player-0.log, under --results-dir) in the same clock. The
 pool is patched as soon as trainer/envs/pool.py has been imported, so the import order before the
 launch is the trainer's own. ``PYTHONPATH`` chooses the tree (an A/B of two commits).
 
@@ -17,22 +20,42 @@ torch's libraries first as trainer/warmup.py does (a dlopen through ctypes, with
 from __future__ import annotations
 
 import builtins
+import glob
+import os
 import resource
 import sys
 import threading
 import time
+from datetime import datetime
 
 STARTED = time.time()
 
 
+def cpu(who: int) -> float:
+    usage = resource.getrusage(who)
+    return usage.ru_utime + usage.ru_stime
+
+
 def mark(name: str) -> None:
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    print(f"mark {name}: wall {time.time() - STARTED:.3f} s, cpu {usage.ru_utime + usage.ru_stime:.3f} s",
-          file=sys.stderr, flush=True)
+    print(f"mark {name}: wall {time.time() - STARTED:.3f} s, cpu {cpu(resource.RUSAGE_SELF):.3f} s, "
+          f"main thread {cpu(resource.RUSAGE_THREAD):.3f} s", file=sys.stderr, flush=True)
+
+
+def simulator_marks(argv: list[str]) -> None:
+    """The stub's own "Connected to trainer" line, in this script's clock (its log's asctime)."""
+    results = argv[argv.index("--results-dir") + 1] if "--results-dir" in argv else "results"
+    for log in sorted(glob.glob(os.path.join(results, "*", "run_logs", "Player-*.log"))):
+        for line in open(log, errors="replace"):
+            if "Connected to trainer" in line:
+                when = datetime.strptime(line[:23], "%Y-%m-%d %H:%M:%S,%f").timestamp()
+                print(f"mark simulator connected ({os.path.basename(log)}): wall {when - STARTED:.3f} s",
+                      file=sys.stderr, flush=True)
+                break
 
 
 def patch_pool(pool) -> None:
     launch, connect, send_step = pool.EnvPool.launch, pool.EnvPool.connect, pool.EnvPool.send_step
+    reset = pool.EnvPool.reset
     sent = []
 
     def timed_launch(self, *args, **kwargs):
@@ -40,8 +63,15 @@ def patch_pool(pool) -> None:
         return launch(self, *args, **kwargs)
 
     def timed_connect(self, *args, **kwargs):
+        mark("wait")
         result = connect(self, *args, **kwargs)
         mark("connected")
+        return result
+
+    def timed_reset(self, *args, **kwargs):
+        result = reset(self, *args, **kwargs)
+        if not sent:
+            mark("reset")
         return result
 
     def timed_send_step(self, *args, **kwargs):
@@ -52,6 +82,7 @@ def patch_pool(pool) -> None:
         return result
 
     pool.EnvPool.launch, pool.EnvPool.connect, pool.EnvPool.send_step = timed_launch, timed_connect, timed_send_step
+    pool.EnvPool.reset = timed_reset
 
 
 def run(argv: list[str]) -> int:
@@ -72,6 +103,7 @@ def run(argv: list[str]) -> int:
 
     code = main(argv)
     mark("end")
+    simulator_marks(argv)
     return code
 
 

@@ -54,7 +54,8 @@ def make_trainer(brain: str, spec: BehaviorSpec, settings, seed: int, device: st
 def attach_demonstrations(trainer: Trainer, brain: str, spec: BehaviorSpec, settings, seed: int) -> None:
     """behavioral_cloning's learner and GAIL's expert data, from their demo_path (read once per
     path); ConfigError (exit 2) if a demonstration does not fit the behavior."""
-    from trainer.demonstrations import demo_paths, load_demonstrations
+    from trainer.config.support import demo_paths
+    from trainer.demonstrations import load_demonstrations
 
     loaded = {}
     for key, path in demo_paths(settings):

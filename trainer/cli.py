@@ -101,11 +101,9 @@ def main(argv: list[str] | None = None) -> int:
         from trainer.config.cli_args import parse_run_options
 
         options = parse_run_options(argv)
-        from trainer.config.support import check_supported
+        from trainer.config.support import check_demo_paths, check_supported
 
         check_supported(options)  # before the results folder or a simulator exists
-        from trainer.demonstrations import check_demo_paths
-
         check_demo_paths(options)
         if options.check:  # docs/mirror.md: no simulator, no results folder
             from trainer.config.spec_check import run_check

@@ -12,8 +12,8 @@ carry only ``vector_actions_deprecated``, which is read as the continuous action
 continuous behavior and as the branch choices otherwise.
 
 Every problem is a ConfigError naming the YAML key (exit code 2): the path at start
-(``check_demo_paths``, before a results folder or a simulator exists), the spec when the
-behavior connects (``load_demonstrations``).
+(trainer/config/support.py's ``check_demo_paths``, before a results folder or a simulator
+exists), the spec when the behavior connects (``load_demonstrations``).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protos.demo_file import DemoFileError, demo_files, read_demo
+from protos.demo_file import DemoFileError, read_demo
 from protos.errors import ProtocolError
 from protos.types import BehaviorSpec
 from trainer.errors import ConfigError
@@ -37,33 +37,6 @@ class DemoExperiences:
 
     def __len__(self) -> int:
         return len(self.rewards)
-
-
-def demo_paths(settings) -> list[tuple[str, str]]:
-    """(YAML key, demo_path) of a behavior's TrainerSettings: GAIL's and behavioral_cloning's."""
-    found = []
-    gail = settings.reward_signals.get("gail")
-    if gail is not None:
-        found.append(("reward_signals.gail.demo_path", gail.demo_path))
-    if settings.behavioral_cloning is not None:
-        found.append(("behavioral_cloning.demo_path", settings.behavioral_cloning.demo_path))
-    return found
-
-
-def check_demo_paths(options) -> None:
-    """ConfigError unless every demo_path of the run names a .demo file or a folder holding one."""
-    blocks = {f"behaviors.{name}": ts for name, ts in options.behaviors.items()}
-    if options.default_settings is not None:
-        blocks = {"default_settings": options.default_settings, **blocks}
-    problems = []
-    for prefix, ts in blocks.items():
-        for key, path in demo_paths(ts):
-            try:
-                demo_files(path)
-            except DemoFileError as error:
-                problems.append(f"'{prefix}.{key}': {error}")
-    if problems:
-        raise ConfigError("\n  ".join(["a demonstration cannot be read:", *problems]))
 
 
 def _describe(spec: BehaviorSpec) -> str:

@@ -495,6 +495,7 @@ def run_training(options, env_vars: EnvVars | None = None, launched: Launched | 
         if ck.record_video and main:
             state.clips = ClipRecorder.for_env(env.env_path, env.seed, run_dir, state.environment_side_channel,
                                                env.env_args or ())
+        pool.serve()  # the gRPC server takes over the ports the launch bound (trainer/envs/pool.py)
     except BaseException:
         pool.close()
         raise

@@ -4,20 +4,22 @@ torch device and thread count, the behaviors.json recorder, and a warning when t
 beyond this machine.
 
 Imported before torch and the loop's modules (trainer/cli.py): the simulators are launched first,
-so keep this module's imports light."""
+so this module and what it imports at the top use neither numpy nor protobuf
+(tests/integration/test_startup_order.py); the rest is imported where it is used."""
 from __future__ import annotations
 
 import ipaddress
 import logging
 import os
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
-from trainer.artifacts.behaviors import BehaviorRecorder
 from trainer.config.env_vars import EnvVars
-from trainer.distributed import check_split
 from trainer.envs.pool import DEFAULT_EDITOR_PORT, EnvPool, PoolSettings
 from trainer.errors import ConfigError, UserError
 from trainer.results_dir import prepare_run_dir, run_dir_of
+
+if TYPE_CHECKING:
+    from trainer.artifacts.behaviors import BehaviorRecorder
 
 logger = logging.getLogger("mlagents_like")
 
@@ -109,7 +111,10 @@ def pool_settings_of(options, env_vars: EnvVars) -> PoolSettings:
     if world > 1 and any(s is not None and s.self_play is not None for s in configured):
         raise UserError(f"{world} data-parallel ranks cannot share one self-play schedule; run a config with "
                         "self_play as one rank (srun -n 1, or without torchrun).")
-    check_split(options, world)  # buffer_size and batch_size each rank can take (exit 2 before anything starts)
+    if world > 1:  # buffer_size and batch_size each rank can take (exit 2 before anything starts)
+        from trainer.distributed import check_split  # (numpy: a run alone launches without it)
+
+        check_split(options, world)
     return PoolSettings(
         env_path=env.env_path, env_args=tuple(env.env_args or ()), base_port=env.base_port,
         num_envs=env.num_envs, num_areas=env.num_areas, seed=env.seed, timeout_wait=env.timeout_wait,
@@ -123,5 +128,7 @@ def pool_settings_of(options, env_vars: EnvVars) -> PoolSettings:
 
 
 def behavior_recorder(options) -> BehaviorRecorder:
+    from trainer.artifacts.behaviors import BehaviorRecorder
+
     env = options.env_settings
     return BehaviorRecorder(env.num_areas, env.env_path or "editor", tuple(options.environment_parameters))

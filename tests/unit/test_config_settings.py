@@ -251,15 +251,15 @@ def test_dodge_configs_carry_the_dodge_thesis_values_and_agree(caplog):
 
 
 def test_mimic_config_carries_the_seed_values_restated_for_its_rate():
-    """configs/mimic.yaml: the mimic thesis' final hyperparameters (batch 1000, buffer 20000, lr 1e-4 linear,
-    beta 5e-4, epsilon 0.2, lambd 0.95, 2 epochs, normalize, 2 x 1024, checkpoints every 200k,
-    summaries every 25k); its per-decision values at 250 Hz (gamma 0.99, horizon 1250 = 5 s, 5e7
-    steps) restated for the 50 decisions per second it runs at, and the motion parameter (0, stand)."""
+    """configs/mimic.yaml: the mimic thesis' final hyperparameters (lr 1e-4 linear, beta 5e-4, epsilon
+    0.2, lambd 0.95, 2 epochs, normalize, 2 x 1024, checkpoints every 200k, summaries every 25k); its
+    per-decision values at 250 Hz (gamma 0.99, horizon 1250 = 5 s, 5e7 steps, buffer 20000 = 80 s and
+    batch 1000 = 4 s of experience, so the same gradient steps per simulated second) restated for the
+    50 decisions per second it runs at, and the motion parameter (0, stand)."""
     options = load_run_options(os.path.join(REPO, "configs", "mimic.yaml"))
     mimic = options.behaviors["Mimic"]
     hp, net = mimic.hyperparameters, mimic.network_settings
-    assert (hp.batch_size, hp.buffer_size, hp.learning_rate, hp.beta, hp.epsilon, hp.lambd, hp.num_epoch) == (
-        1000, 20000, 1e-4, 5e-4, 0.2, 0.95, 2)
+    assert (hp.learning_rate, hp.beta, hp.epsilon, hp.lambd, hp.num_epoch) == (1e-4, 5e-4, 0.2, 0.95, 2)
     assert hp.learning_rate_schedule == "linear"
     assert (net.normalize, net.num_layers, net.hidden_units) == (True, 2, 1024)
     rate = options.environment_parameters["decision_hz"].curriculum[0].value.value
@@ -268,5 +268,6 @@ def test_mimic_config_carries_the_seed_values_restated_for_its_rate():
     assert mimic.reward_signals["extrinsic"].gamma == pytest.approx(0.99 ** (250 / rate), abs=5e-4)
     assert mimic.reward_signals["extrinsic"].strength == 1.0
     assert (mimic.time_horizon / rate, mimic.max_steps / rate) == (1250 / 250, 50_000_000 / 250)
+    assert (hp.buffer_size / rate, hp.batch_size / rate) == (20000 / 250, 1000 / 250)
     assert (mimic.summary_freq, mimic.checkpoint_interval, mimic.keep_checkpoints) == (25000, 200000, 5)
     assert set(options.environment_parameters) == {"motion", "decision_hz"}

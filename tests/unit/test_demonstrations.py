@@ -19,7 +19,8 @@ from protos.types import ActionSpec, BehaviorSpec, DimensionProperty, Observatio
 from trainer.artifacts.checkpoints import load_checkpoint, save_checkpoint
 from trainer.behavioral_cloning import BehavioralCloning
 from trainer.config.settings import BehavioralCloningSettings
-from trainer.demonstrations import DemoExperiences, check_demo_paths, load_demonstrations
+from trainer.config.support import check_demo_paths
+from trainer.demonstrations import DemoExperiences, load_demonstrations
 from trainer.errors import ConfigError
 from trainer.common.hyperparams import SignalNetwork
 from trainer.ppo.hyperparams import PPOHyperparams

@@ -8,7 +8,6 @@ simulator exists, naming each key and what to do.
 """
 from __future__ import annotations
 
-from protos.types import ObservationType
 from trainer.config.settings import RunOptions, TrainerSettings
 from trainer.errors import ConfigError
 
@@ -41,9 +40,41 @@ def check_supported(options: RunOptions) -> None:
         )
 
 
+def demo_paths(settings: TrainerSettings) -> list[tuple[str, str]]:
+    """(YAML key, demo_path) of a behavior's TrainerSettings: GAIL's and behavioral_cloning's."""
+    found = []
+    gail = settings.reward_signals.get("gail")
+    if gail is not None:
+        found.append(("reward_signals.gail.demo_path", gail.demo_path))
+    if settings.behavioral_cloning is not None:
+        found.append(("behavioral_cloning.demo_path", settings.behavioral_cloning.demo_path))
+    return found
+
+
+def check_demo_paths(options: RunOptions) -> None:
+    """ConfigError unless every demo_path of the run names a .demo file or a folder holding one
+    (trainer/demonstrations.py reads them once the behavior connects)."""
+    blocks = {f"behaviors.{name}": ts for name, ts in options.behaviors.items()}
+    if options.default_settings is not None:
+        blocks = {"default_settings": options.default_settings, **blocks}
+    problems = []
+    for prefix, ts in blocks.items():
+        for key, path in demo_paths(ts):
+            from protos.demo_file import DemoFileError, demo_files  # protobuf: only a run with demonstrations
+
+            try:
+                demo_files(path)
+            except DemoFileError as error:
+                problems.append(f"'{prefix}.{key}': {error}")
+    if problems:
+        raise ConfigError("\n  ".join(["a demonstration cannot be read:", *problems]))
+
+
 def goal_conditioning_note(observation_specs, ts: TrainerSettings) -> str | None:
     """A warning when a behavior sends goal-signal observations that ML-Agents would feed to its
     hyper-network (goal_conditioning_type: hyper, the default); they are plain inputs here."""
+    from protos.types import ObservationType  # numpy: the checks above run before the simulators launch
+
     goals = [o.name for o in observation_specs if o.observation_type == ObservationType.GOAL_SIGNAL]
     if not goals or ts.network_settings.goal_conditioning_type != "hyper":
         return None

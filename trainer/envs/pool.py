@@ -13,16 +13,20 @@ partial trajectories.
 from __future__ import annotations
 
 import logging
+import socket
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from protos.types import ActionTuple, BehaviorSpec, StepResult
 from trainer.config.env_vars import DEFAULT_SPIN_WAIT_S
 from trainer.envs.cpus import spin_budget
 from trainer.envs.launcher import RestartPolicy, SimulatorProcess, build_launch_command, resolve_env_path
 from trainer.errors import SimulatorExitedError, UnityTimeOutError, UserError
-from trainer.protocol.server import UnityEndpoint
+from trainer.protocol.listen import listen, port_in_use_error
+
+if TYPE_CHECKING:  # the server (numpy, protobuf) is imported after the launch: ``_Worker.serve``
+    from protos.types import ActionTuple, BehaviorSpec, StepResult
+    from trainer.protocol.server import UnityEndpoint
 
 logger = logging.getLogger("mlagents_like")
 
@@ -67,6 +71,7 @@ class _Worker:
         self.spin_wait = spin_wait  # s, both ends of the exchange (protos/pacing.py, trainer/envs/cpus.py)
         self.port = settings.base_port + worker_id if env_path else DEFAULT_EDITOR_PORT
         self.process: SimulatorProcess | None = None
+        self.listener: socket.socket | None = None  # bound, not yet served (``launch``)
         self.endpoint: UnityEndpoint | None = None
 
     def connect(self) -> None:
@@ -74,7 +79,12 @@ class _Worker:
         self.handshake()
 
     def launch(self) -> None:
-        """Listen on the port, then start the simulator (it boots while the trainer does other work)."""
+        """Listen on the port, then start the simulator (it boots while the trainer does other work).
+
+        A simulator the HTTP/2 transport serves is started as soon as its port listens, before the
+        gRPC server's modules are imported: the socket is bound with the standard library, and
+        ``serve`` hands it to the server later (docs/performance.md, "Start-up and exit"). grpcio
+        binds its own socket, and the Editor is started by the user: both are served at once."""
         s = self.settings
         if self.env_path:
             cmd = build_launch_command(
@@ -83,20 +93,37 @@ class _Worker:
                 s.transport,
             )
             self.process = SimulatorProcess(cmd, self.worker_id, log_folder=s.log_folder, debug=s.debug)
-        is_alive = self.process.is_alive if self.process else None
-        describe = self.process.describe if self.process else "the Unity Editor"
-        self.endpoint = UnityEndpoint(self.port, bind=s.bind, timeout_wait=s.timeout_wait,
-                                      is_alive=is_alive, describe=describe, spin_wait=self.spin_wait,
-                                      transport=s.transport, editor=self.process is None)
-        self.endpoint.start()  # bind before launching, so the simulator finds us listening
+        if self.process is not None and s.transport == "http2":
+            try:
+                self.listener = listen(s.bind, self.port)  # before launching: the simulator finds us listening
+            except OSError:
+                raise port_in_use_error(s.bind, self.port, False, self.process.describe()) from None
+        else:
+            self.serve()
         if self.process:
             self.process.start()
         else:
             logger.info("Listening on port %d. Start training by pressing the Play button in the Unity Editor.",
                         self.port)
 
+    def serve(self) -> None:
+        """The gRPC server on this worker's port (on the socket ``launch`` bound, if any)."""
+        if self.endpoint is not None:
+            return
+        from trainer.protocol.server import UnityEndpoint
+
+        s = self.settings
+        is_alive = self.process.is_alive if self.process else None
+        describe = self.process.describe if self.process else "the Unity Editor"
+        listener, self.listener = self.listener, None
+        self.endpoint = UnityEndpoint(self.port, bind=s.bind, timeout_wait=s.timeout_wait,
+                                      is_alive=is_alive, describe=describe, spin_wait=self.spin_wait,
+                                      transport=s.transport, editor=self.process is None, listener=listener)
+        self.endpoint.start()
+
     def handshake(self) -> None:
         s = self.settings
+        self.serve()
         init = self.endpoint.handshake(s.seed + self.worker_id, s.num_areas)
         logger.info("Connected to Unity environment with package version %s and communication version %s",
                     init.package_version, init.communication_version)
@@ -104,9 +131,12 @@ class _Worker:
     def close(self, timeout: float) -> None:
         if self.endpoint is not None:
             self.endpoint.close()
+        if self.listener is not None:
+            self.listener.close()
         if self.process is not None:
             self.process.close(timeout)
         self.endpoint = None
+        self.listener = None
         self.process = None
 
 
@@ -150,6 +180,16 @@ class EnvPool:
         try:
             for w in self.workers:
                 w.launch()
+        except BaseException:
+            self.close()
+            raise
+
+    def serve(self) -> None:
+        """Serve every launched simulator's port (``_Worker.serve``): the gRPC server's modules
+        are imported here if they were not yet, so call it once the simulators boot."""
+        try:
+            for w in self.workers:
+                w.serve()
         except BaseException:
             self.close()
             raise

@@ -57,6 +57,7 @@ from protos.http2 import (
     hpack_literal, strip_padding, take_frames,
 )
 from protos.pacing import PacedWait, wait_paced
+from trainer.protocol.listen import listen
 
 logger = logging.getLogger(__name__)
 
@@ -597,7 +598,10 @@ def _peer_name(sock: socket.socket) -> str:
 class Http2Transport:
     """Listens on ``bind:port`` and hands out complete unary calls of ``path``."""
 
-    def __init__(self, bind: str, port: int, path: bytes, max_message_bytes: int, spin_s: float = 0.0) -> None:
+    def __init__(self, bind: str, port: int, path: bytes, max_message_bytes: int, spin_s: float = 0.0,
+                 listener: socket.socket | None = None) -> None:
+        """``listener``: a socket already listening on ``bind:port`` (trainer.protocol.listen) to
+        serve on instead of binding one in ``start``; the transport closes it."""
         self.bind = bind
         self.port = port
         self.path = path
@@ -606,6 +610,7 @@ class Http2Transport:
         self.client_gone = False
         self.closed = False
         self._listener: socket.socket | None = None
+        self._given_listener = listener
         self._selector = selectors.DefaultSelector()
         self._connections: dict[socket.socket, _Connection] = {}
         self._ready: collections.deque[IncomingCall] = collections.deque()
@@ -623,16 +628,7 @@ class Http2Transport:
         self._wake: tuple[socket.socket, socket.socket] | None = None
 
     def start(self) -> None:
-        family = socket.AF_INET6 if ":" in self.bind else socket.AF_INET
-        listener = socket.socket(family, socket.SOCK_STREAM)
-        try:
-            listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # TIME_WAIT only
-            listener.bind((self.bind, self.port))
-            listener.listen(8)
-        except OSError:
-            listener.close()
-            raise
-        listener.setblocking(False)
+        listener, self._given_listener = self._given_listener or listen(self.bind, self.port), None
         self.port = listener.getsockname()[1]
         self._listener = listener
         self._selector.register(listener, selectors.EVENT_READ)
@@ -793,6 +789,9 @@ class Http2Transport:
             self._close_locked(grace)
 
     def _close_locked(self, grace: float) -> None:
+        if self._given_listener is not None:  # never started
+            self._given_listener.close()
+            self._given_listener = None
         if self._listener is not None:
             self._selector.unregister(self._listener)
             self._listener.close()

@@ -42,6 +42,7 @@ from trainer.errors import (
 )
 from trainer.protocol import codec
 from trainer.protocol.http2_server import Http2Transport
+from trainer.protocol.listen import port_in_use_error
 from trainer.stop import STOP
 
 if TYPE_CHECKING:  # grpcio is imported by its transport only (MLAGENTS_LIKE_TRANSPORT=grpcio)
@@ -246,13 +247,17 @@ class UnityEndpoint:
         transport: str = "http2",
         spin_wait: float = 0.0,
         editor: bool = False,
+        listener: socket.socket | None = None,
     ) -> None:
         """``describe``: names the simulator in errors (a callable is asked when the error
         happens, so it can say how the process ended). ``spin_wait`` (s): poll for the simulator's
         next call up to this long past when it is due instead of sleeping through it
         (protos/pacing.py; HTTP/2 transport only). ``transport``: one of TRANSPORTS (the run's
         MLAGENTS_LIKE_TRANSPORT, trainer.config.env_vars). ``editor``: the Unity Editor connects
-        (no --env), which changes the advice when the port is taken."""
+        (no --env), which changes the advice when the port is taken. ``listener``: a socket
+        already listening on ``bind:port`` (trainer.protocol.listen; the pool binds it before it
+        launches the simulator), which ``start`` serves on and this endpoint then owns (HTTP/2
+        transport only)."""
         self.port = port
         self.editor = editor
         self.bind = bind
@@ -265,6 +270,9 @@ class UnityEndpoint:
         self.transport_name = transport
         if self.transport_name not in TRANSPORTS:
             raise ValueError(f"unknown transport {self.transport_name!r}")
+        if listener is not None and self.transport_name != "http2":
+            raise ValueError("only the http2 transport serves on a given listening socket")
+        self._listener = listener
         self._transport = None
         self._pending = None  # the simulator call we owe an answer
         self._deciding: dict[str, int] = {}  # agents per behavior that wait for an action
@@ -274,12 +282,15 @@ class UnityEndpoint:
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
-        """Check the port is free, then serve UnityToExternalProto on ``bind:port``."""
-        self._check_port_free()
+        """Check the port is free, then serve UnityToExternalProto on ``bind:port`` (on the
+        given listening socket, if any: it is bound already)."""
         if self.transport_name == "grpcio":
+            self._check_port_free()  # grpcio's own bind would not fail on every taken port
             transport = _GrpcioTransport(self.bind, self.port, MAX_MESSAGE_BYTES)
         else:
-            transport = Http2Transport(self.bind, self.port, EXCHANGE_PATH, MAX_MESSAGE_BYTES, self.spin_wait)
+            transport = Http2Transport(self.bind, self.port, EXCHANGE_PATH, MAX_MESSAGE_BYTES, self.spin_wait,
+                                       listener=self._listener)
+            self._listener = None  # the transport owns it now (and closes it)
         try:
             transport.start()
         except OSError:
@@ -299,24 +310,17 @@ class UnityEndpoint:
             probe.close()
 
     def _port_in_use_error(self) -> PortInUseError:
-        if self.editor:  # the Editor always connects to its fixed port: --base-port cannot move it
-            return PortInUseError(
-                f"Port {self.port} on {self.bind} is already in use; the Unity Editor always connects "
-                f"to port {self.port}, so --base-port cannot help. Stop the process holding it (often "
-                f"another training run waiting for the Editor; `ss -ltnp 'sport = :{self.port}'` or "
-                f"`lsof -i :{self.port}` names it), or train a built player with --env and --base-port."
-            )
-        return PortInUseError(
-            f"Port {self.port} on {self.bind} is already in use{self._for()}, maybe by another "
-            "training run or a simulator that did not exit. Stop it, or pick other ports with "
-            "--base-port."
-        )
+        describe = self.describe() if callable(self.describe) else self.describe
+        return port_in_use_error(self.bind, self.port, self.editor, describe)
 
     def close(self) -> None:
         """Answer any pending simulator call with status 400, then stop serving. Idempotent."""
         if self._closed:
             return
         self._closed = True
+        if self._listener is not None:  # never started
+            self._listener.close()
+            self._listener = None
         if self._pending is not None:
             self._pending.answer(_status_message(STATUS_CLOSING).SerializeToString())
             self._pending = None

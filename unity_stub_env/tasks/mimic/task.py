@@ -46,7 +46,11 @@ Actions, 26 continuous in [-1, 1], one per axis in mimic.xml's actuator order (`
     rest pose and the whole range stays reachable. Exploration is the hard part of this mode:
     PPO's Gaussian starts at std 1/3 in action units (std 1, sent as clamp(a, -3, 3) / 3), and
     white noise that small around the standing pose topples the ragdoll within seconds
-    (bench/RESULTS.md); the bench recipes start from cloned demonstrations instead
+    (bench/RESULTS.md), mostly through the knees; the seed's drive (kp 400, kv 40, torque caps
+    20-140 N m) and its map (a = 0 at the middle of each range) do not prevent it: with them even
+    zero actions fall within a second (bench/RESULTS.md, "mimic: does the seed's actuation keep an
+    untrained ragdoll up?"). The bench
+    recipes start from cloned demonstrations instead
     (bench/mimic/*_bc*.yaml, docs/stub-tasks.md);
   r > 0 (DeepMimic-like, our option): target = reference angle + a r (high - low) / 2, clipped to
     the limits: zero actions track the reference and the policy learns corrections.
